@@ -1,0 +1,39 @@
+"""Units and tolerances, in one place.
+
+Units inside the package: millimetres, radians, kilograms, newtons. Files (scenarios,
+plans) use degrees; conversion happens only at the I/O boundary (``ldhp_tamp``).
+
+The planner is stricter than the plan validator: a plan made with the planner's
+tolerances passes the validator's (``ldhp-plan/1``) 1 mm / 1 degree rules with margin.
+"""
+
+from __future__ import annotations
+
+#: Two features closer than this (mm) are in contact (planner side).
+CONTACT_TOL: float = 0.1
+
+#: Largest overlap depth (mm) the planner tolerates between bodies that touch.
+PENETRATION_TOL: float = 0.1
+
+#: Validator tolerances of the plan spec (``ldhp-plan/1``): contact and position (mm).
+VALIDATE_TOL: float = 1.0
+
+#: Validator angle tolerance of the plan spec (degrees).
+VALIDATE_TOL_DEG: float = 1.0
+
+#: Largest motion (mm) of any object vertex, finger centre or finger vertex, and largest
+#: width change, between consecutive plan waypoints (plan spec rule 2).
+MAX_WAYPOINT_STEP: float = 5.0
+
+#: Waypoint spacing the planner aims for (mm): below MAX_WAYPOINT_STEP with margin.
+WAYPOINT_STEP: float = 4.0
+
+#: Quasi-static feasibility margin, in normalised wrench units (forces / (m g), moments /
+#: (m g L)): a certificate whose margin is below this counts as infeasible.
+FEASIBILITY_MARGIN: float = 1e-7
+
+#: Gravity (m/s^2), pointing along world -y.
+GRAVITY: float = 9.81
+
+#: Numerical zero for geometric predicates (mm or mm^2).
+EPS: float = 1e-9
