@@ -15,6 +15,11 @@ CONTACT_TOL: float = 0.1
 #: Largest overlap depth (mm) the planner tolerates between bodies that touch.
 PENETRATION_TOL: float = 0.1
 
+#: Overlap tolerance (mm) used when a sweep bisects for the exact parameter where a new
+#: contact is made: much tighter than PENETRATION_TOL, because the erosion rule lets a
+#: thin sliver at a vertex sink about twice its tolerance.
+SWEEP_TOL: float = 1e-4
+
 #: Validator tolerances of the plan spec (``ldhp-plan/1``): contact and position (mm).
 VALIDATE_TOL: float = 1.0
 

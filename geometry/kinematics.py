@@ -1,0 +1,407 @@
+"""Primitive kinematics: the one-parameter pose families of the MoveObject primitives.
+
+Each MoveObject primitive moves the object along a one-parameter family of poses
+``T(s)``, ``s >= 0``, that keeps its defining contacts (paper, Table I):
+
+- ``tip``: rotation about a fixed world pivot (an object vertex sticking on an
+  environment edge, or a convex environment vertex sticking on an object edge);
+  ``s`` is the rotation angle (radians) in the chosen sense.
+  ``T(s) = Rot_P(sense * s) * T0``.
+- ``push``: translation along an environment edge's tangent (the contact with that edge
+  is kept); ``s`` is the travel in mm. ``T(s) = T0 + s d``.
+- ``biplanar-slide``: the object keeps two point contacts on two environment features
+  while it rotates (corner guidance); ``s`` is the orientation change (radians) in the
+  chosen sense. For each orientation, every kept contact is one linear equation in the
+  translation ``t`` (see :func:`contact_line`), solved as a 2x2 system.
+- ``air-move`` uses :func:`translate` (free-space straight line; waypoints chain them).
+
+:func:`sweep` walks a motion with a small step, identifies the contact state at every
+sample and cuts the walk into pieces of constant state, stopping where the object would
+penetrate the environment or a kept contact would leave its finite feature. The piece
+boundaries are refined by bisection so that a new contact is made exactly.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from geometry.features import Contact, ContactKind, ContactState
+from geometry.poses import Pose, wrap_angle
+from geometry.tolerances import CONTACT_TOL, EPS, SWEEP_TOL
+from geometry.world import World
+
+FloatArray = NDArray[np.float64]
+
+
+class MotionKind(enum.Enum):
+    ROTATE = "rotate"  # tip: rotation about a fixed world point
+    TRANSLATE = "translate"  # push and air-move: straight-line translation
+    TWO_CONTACT = "two-contact"  # biplanar-slide: rotation keeping two contacts
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A one-parameter family of object poses starting at ``start`` (``s = 0``).
+
+    Build with :func:`rotate_about`, :func:`translate` or :func:`two_contact`.
+    """
+
+    kind: MotionKind
+    start: Pose
+    sense: int = 1
+    pivot: tuple[float, float] | None = None  # ROTATE
+    direction: tuple[float, float] | None = None  # TRANSLATE (unit)
+    kept: tuple[Contact, ...] = ()  # contacts the motion keeps (TWO_CONTACT: exactly 2)
+    lines: tuple[tuple[float, float, float, float, float, float], ...] = ()  # TWO_CONTACT
+
+    def poses(self, s: Sequence[float] | FloatArray) -> FloatArray:
+        """Poses (n, 3) at the parameter values ``s`` (NaN rows where undefined)."""
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        x0, y0, t0 = self.start.x, self.start.y, self.start.theta
+        out = np.empty((s.size, 3))
+        if self.kind is MotionKind.TRANSLATE:
+            dx, dy = self.direction  # type: ignore[misc]
+            out[:, 0] = x0 + s * dx
+            out[:, 1] = y0 + s * dy
+            out[:, 2] = t0
+        elif self.kind is MotionKind.ROTATE:
+            px, py = self.pivot  # type: ignore[misc]
+            a = self.sense * s
+            c, sn = np.cos(a), np.sin(a)
+            out[:, 0] = px + c * (x0 - px) - sn * (y0 - py)
+            out[:, 1] = py + sn * (x0 - px) + c * (y0 - py)
+            out[:, 2] = wrap_angle(t0 + a)
+        else:
+            theta = t0 + self.sense * s
+            out[:, 2] = wrap_angle(theta)
+            out[:, :2] = _solve_two_lines(self.lines, theta)
+        return out
+
+    def pose(self, s: float) -> Pose:
+        return Pose.from_array(self.poses([s])[0])
+
+    def vertex_speed(self, world: World) -> float:
+        """Upper bound of how far (mm) any object vertex moves per unit of ``s``."""
+        verts = world.object_vertices(self.start)
+        if self.kind is MotionKind.TRANSLATE:
+            return 1.0
+        if self.kind is MotionKind.ROTATE:
+            return float(np.max(np.linalg.norm(verts - np.asarray(self.pivot), axis=1)))
+        # two-contact: finite-difference estimate, with margin
+        h = 1e-4
+        p = self.poses([0.0, h])
+        if np.any(~np.isfinite(p)):
+            return world.object.polygon.radius * 4.0
+        v1 = world.object.polygon.transformed(*p[1])
+        return 2.0 * float(np.max(np.linalg.norm(v1 - verts, axis=1))) / h + 1.0
+
+
+def rotate_about(start: Pose, pivot: Sequence[float], sense: int) -> Motion:
+    """Rotation about a world point; ``sense`` +1 counter-clockwise, -1 clockwise."""
+    return Motion(MotionKind.ROTATE, start, int(np.sign(sense)), pivot=(float(pivot[0]), float(pivot[1])))
+
+
+def translate(start: Pose, direction: Sequence[float]) -> Motion:
+    """Straight-line translation along a (normalised) direction."""
+    d = np.asarray(direction, dtype=float)
+    n = float(np.linalg.norm(d))
+    if n <= EPS:
+        raise ValueError("translation direction must be non-zero")
+    return Motion(MotionKind.TRANSLATE, start, 1, direction=(float(d[0] / n), float(d[1] / n)))
+
+
+def contact_line(world: World, contact: Contact) -> tuple[float, float, float, float, float, float]:
+    """The kept contact as a constraint linear in the translation, for any orientation.
+
+    Returns ``(kind, a, b, c, d, e)`` with the meaning:
+
+    - vertex-edge (object vertex ``p`` (object frame) on the line of environment edge
+      with outward normal ``n`` through point ``q``): ``n . (R(theta) p + t) = n . q``;
+      encoded as kind 0, ``(p_x, p_y, n_x, n_y, n . q)``.
+    - edge-vertex (environment vertex ``q`` on the line of object edge with outward
+      normal ``m`` (object frame) through object point ``a``):
+      ``(R(theta) m) . (q - t) = m . a``; encoded as kind 1, ``(m_x, m_y, q_x, q_y, m . a)``.
+    """
+    obj = world.object.polygon
+    env = world.environment
+    if contact.kind is ContactKind.VERTEX_EDGE:
+        p = obj.vertices[contact.obj]
+        n = env.normals[contact.env]
+        q = env.edges[contact.env][0]
+        return (0.0, float(p[0]), float(p[1]), float(n[0]), float(n[1]), float(n @ q))
+    if contact.kind is ContactKind.EDGE_VERTEX:
+        m = obj.normals[contact.obj]
+        a = obj.vertices[contact.obj]
+        q = env.vertices[contact.env]
+        return (1.0, float(m[0]), float(m[1]), float(q[0]), float(q[1]), float(m @ a))
+    raise ValueError(f"an edge-edge contact fixes the orientation; keep one of its vertices instead: {contact.name}")
+
+
+def _solve_two_lines(lines, theta: FloatArray) -> FloatArray:
+    """Translations (n, 2) satisfying both contact lines at orientations ``theta``."""
+    theta = np.asarray(theta, dtype=float)
+    c, s = np.cos(theta), np.sin(theta)
+    A = np.empty(theta.shape + (2, 2))
+    b = np.empty(theta.shape + (2,))
+    for row, (kind, u0, u1, w0, w1, k) in enumerate(lines):
+        if kind == 0.0:
+            # n . (R p + t) = k  ->  n . t = k - n . (R p)
+            rpx = c * u0 - s * u1
+            rpy = s * u0 + c * u1
+            A[..., row, 0] = w0
+            A[..., row, 1] = w1
+            b[..., row] = k - (w0 * rpx + w1 * rpy)
+        else:
+            # (R m) . (q - t) = k  ->  (R m) . t = (R m) . q - k
+            rmx = c * u0 - s * u1
+            rmy = s * u0 + c * u1
+            A[..., row, 0] = rmx
+            A[..., row, 1] = rmy
+            b[..., row] = rmx * w0 + rmy * w1 - k
+    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+    ok = np.abs(det) > 1e-9
+    safe = np.where(ok, det, 1.0)
+    tx = (b[..., 0] * A[..., 1, 1] - b[..., 1] * A[..., 0, 1]) / safe
+    ty = (A[..., 0, 0] * b[..., 1] - A[..., 1, 0] * b[..., 0]) / safe
+    out = np.stack([tx, ty], axis=-1)
+    out[~ok] = np.nan
+    return out
+
+
+def two_contact(world: World, start: Pose, kept: tuple[Contact, Contact], sense: int) -> Motion:
+    """Rotation by ``sense`` keeping two point contacts (vertex-edge or edge-vertex).
+
+    The start pose must satisfy both contacts; the two constraint lines must not be
+    parallel at the start orientation (otherwise the motion is not a slide on two
+    features but a translation, see :func:`translate`).
+    """
+    lines = tuple(contact_line(world, c) for c in kept)
+    m = Motion(MotionKind.TWO_CONTACT, start, int(np.sign(sense)), kept=tuple(kept), lines=lines)
+    p0 = m.poses([0.0])[0]
+    if not np.all(np.isfinite(p0)):
+        raise ValueError("the two kept contacts are parallel: no biplanar motion")
+    return m
+
+
+# --------------------------------------------------------------------------- sweeps
+
+
+class SweepEnd(enum.Enum):
+    """Why a sweep stopped."""
+
+    BLOCKED = "blocked"  # the next step would penetrate the environment
+    CONTACT_LOST = "contact-lost"  # a kept contact would leave its finite feature
+    LIMIT = "limit"  # the parameter range was exhausted
+    DEGENERATE = "degenerate"  # the motion is undefined further on (two-contact singularity)
+
+
+@dataclass(frozen=True)
+class SweepPiece:
+    """A parameter interval ``[s0, s1]`` over which the contact state is constant."""
+
+    state: ContactState
+    s0: float
+    s1: float
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """The contact states met along a motion, in order, and why the walk ended."""
+
+    motion: Motion
+    pieces: tuple[SweepPiece, ...]
+    end: SweepEnd
+
+    @property
+    def states(self) -> tuple[ContactState, ...]:
+        return tuple(p.state for p in self.pieces)
+
+    @property
+    def s_end(self) -> float:
+        return self.pieces[-1].s1 if self.pieces else 0.0
+
+
+OverlapFn = Callable[[World, FloatArray], NDArray[np.bool_]]
+
+
+def _default_overlap(world: World, poses: FloatArray) -> NDArray[np.bool_]:
+    from geometry.collision import object_env_overlap
+
+    return object_env_overlap(world, poses, tol=SWEEP_TOL)
+
+
+def _state_keys(world: World, poses: FloatArray, tol: float) -> tuple[list[bytes], object]:
+    """A hashable key per pose (packed principal-contact masks) and the masks."""
+    from geometry.contacts import principal_contact_masks
+
+    m = principal_contact_masks(world, poses, tol)
+    flat = np.concatenate(
+        [m.vertex_edge.reshape(len(poses), -1), m.edge_vertex.reshape(len(poses), -1),
+         m.edge_edge.reshape(len(poses), -1)], axis=1)
+    packed = np.packbits(flat, axis=1)
+    return [row.tobytes() for row in packed], m
+
+
+def kept_contact_holds(world: World, contact: Contact, poses: FloatArray, tol: float = CONTACT_TOL) -> NDArray[np.bool_]:
+    """Whether a kept point contact is still on its *finite* features at each pose.
+
+    For a vertex-edge contact the object vertex must project inside the environment edge;
+    for an edge-vertex contact the environment vertex must project inside the object edge.
+    (The motion keeps the contact on the feature's line by construction.)
+    """
+    P = np.asarray(poses, dtype=float).reshape(-1, 3)
+    obj = world.object.polygon
+    env = world.environment
+    c, s = np.cos(P[:, 2]), np.sin(P[:, 2])
+    if contact.kind is ContactKind.VERTEX_EDGE:
+        v = obj.vertices[contact.obj]
+        wx = c * v[0] - s * v[1] + P[:, 0]
+        wy = s * v[0] + c * v[1] + P[:, 1]
+        a, b = env.edges[contact.env]
+        d = b - a
+        L = float(np.hypot(*d))
+        u = ((wx - a[0]) * d[0] + (wy - a[1]) * d[1]) / L
+        return (u >= -tol) & (u <= L + tol)
+    if contact.kind is ContactKind.EDGE_VERTEX:
+        q = env.vertices[contact.env]
+        a, b = obj.edges[contact.obj]
+        # environment vertex in the object frame
+        dx, dy = q[0] - P[:, 0], q[1] - P[:, 1]
+        qx = c * dx + s * dy
+        qy = -s * dx + c * dy
+        d = b - a
+        L = float(np.hypot(*d))
+        u = ((qx - a[0]) * d[0] + (qy - a[1]) * d[1]) / L
+        return (u >= -tol) & (u <= L + tol)
+    raise ValueError("edge-edge contacts are kept through one of their vertex contacts")
+
+
+def _last_true(pred: Callable[[FloatArray], NDArray[np.bool_]], lo: float, hi: float, bits: int,
+               width: int = 64) -> float:
+    """Largest x in [lo, hi] with ``pred(x)`` true, for a predicate true at ``lo``, false
+    at ``hi`` and monotone in between, to ``bits`` binary digits of ``hi - lo``.
+
+    A batched multisection: each round evaluates ``width`` points at once (one vectorised
+    call) and keeps the sub-interval where the predicate turns false.
+    """
+    rounds = max(1, int(math.ceil(bits / math.log2(width + 1))))
+    for _ in range(rounds):
+        x = np.linspace(lo, hi, width + 2)[1:-1]
+        ok = pred(x)
+        bad = np.flatnonzero(~ok)
+        if bad.size == 0:
+            lo = float(x[-1])
+        else:
+            i = int(bad[0])
+            hi = float(x[i])
+            lo = float(x[i - 1]) if i > 0 else lo
+    return lo
+
+
+def sweep(
+    world: World,
+    motion: Motion,
+    s_max: float,
+    overlap_fn: OverlapFn | None = None,
+    *,
+    step_mm: float = 1.0,
+    refine_bits: int = 40,
+    tol: float = CONTACT_TOL,
+) -> Sweep:
+    """Walk ``motion`` from ``s = 0`` to at most ``s_max`` and cut it by contact state.
+
+    The walk samples ``s`` so that no object vertex moves more than ``step_mm`` between
+    samples, stops before the first sample that overlaps the environment (``overlap_fn``,
+    by default :func:`geometry.collision.object_env_overlap` at ``SWEEP_TOL``) or that
+    loses a kept contact, and refines (to ``refine_bits`` binary digits of the step)
+    between the last good and first bad sample so the walk ends exactly where the new
+    contact is made. Every state change inside the walk is refined likewise (to half the
+    digits), so piece boundaries are accurate. States are identified in batched calls.
+    """
+    overlap = overlap_fn or _default_overlap
+    speed = max(motion.vertex_speed(world), EPS)
+    n = max(1, int(math.ceil(s_max * speed / step_mm)))
+    s = np.linspace(0.0, s_max, n + 1)
+
+    def good_at(x: FloatArray) -> NDArray[np.bool_]:
+        p = motion.poses(x)
+        ok = np.all(np.isfinite(p), axis=1)
+        safe = np.where(np.isfinite(p), p, 0.0)
+        for c in motion.kept:
+            ok &= kept_contact_holds(world, c, safe)
+        idx = np.flatnonzero(ok)
+        if idx.size:
+            ok[idx] = ~overlap(world, p[idx])
+        return ok
+
+    poses = motion.poses(s)
+    good = good_at(s)
+    if not good[0]:
+        _, masks = _state_keys(world, motion.start.as_array()[None], tol)
+        return Sweep(motion, (SweepPiece(masks.state(0), 0.0, 0.0),), SweepEnd.BLOCKED)  # type: ignore[attr-defined]
+    if np.all(good):
+        end = SweepEnd.LIMIT
+    else:
+        first_bad = int(np.argmin(good))
+        p_bad = poses[first_bad]
+        if not np.all(np.isfinite(p_bad)):
+            end = SweepEnd.DEGENERATE
+        elif any(not kept_contact_holds(world, c, p_bad[None])[0] for c in motion.kept):
+            end = SweepEnd.CONTACT_LOST
+        else:
+            end = SweepEnd.BLOCKED
+        lo = _last_true(good_at, float(s[first_bad - 1]), float(s[first_bad]), refine_bits)
+        s = np.concatenate([s[:first_bad], [lo]]) if lo > s[first_bad - 1] else s[:first_bad]
+        poses = motion.poses(s)
+    keys, masks = _state_keys(world, poses, tol)
+    pieces: list[SweepPiece] = []
+    start_i = 0
+    s0 = 0.0
+    for i in range(1, len(s) + 1):
+        if i < len(s) and keys[i] == keys[start_i]:
+            continue
+        state = masks.state(start_i)  # type: ignore[attr-defined]
+        if i == len(s):
+            pieces.append(SweepPiece(state, s0, float(s[-1])))
+            break
+        key = keys[start_i]
+
+        def same(x: FloatArray, key: bytes = key) -> NDArray[np.bool_]:
+            return np.array([k == key for k in _state_keys(world, motion.poses(x), tol)[0]])
+
+        boundary = _last_true(same, float(s[i - 1]), float(s[i]), refine_bits // 2)
+        pieces.append(SweepPiece(state, s0, boundary))
+        s0 = boundary
+        start_i = i
+    return Sweep(motion, tuple(pieces), end)
+
+
+def dense_parameters(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> FloatArray:
+    """Parameter values from ``s0`` to ``s1`` (both included) such that no object vertex
+    moves more than ``step_mm`` between consecutive values.
+
+    Starts from a uniform grid sized by the motion's vertex speed and halves every interval
+    that still moves a vertex too far (two-contact motions have a varying speed).
+    """
+    verts = world.object.polygon.vertices
+    speed = max(motion.vertex_speed(world), EPS)
+    n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))
+    s = np.linspace(s0, s1, n + 1)
+    for _ in range(30):
+        poses = motion.poses(s)
+        c, sn = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        wx = c[:, None] * verts[None, :, 0] - sn[:, None] * verts[None, :, 1] + poses[:, 0:1]
+        wy = sn[:, None] * verts[None, :, 0] + c[:, None] * verts[None, :, 1] + poses[:, 1:2]
+        d = np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)
+        too_far = ~(d <= step_mm)  # NaN counts as too far
+        if not np.any(too_far):
+            return s
+        mids = 0.5 * (s[:-1][too_far] + s[1:][too_far])
+        s = np.sort(np.concatenate([s, mids]))
+    return s
