@@ -1,0 +1,39 @@
+"""The primitive library's Python side: implementations bound to PDDL action names.
+
+The domain file (``domains/ldhp.pddl``) lists the primitives; :mod:`.registry` binds each
+action name to its implementation and checks the two against each other before any search.
+Implementations register themselves on the shared :data:`REGISTRY` when their module is
+imported; the modules are imported explicitly below (no folder scanning), one line each,
+as docs/extending.md describes.
+"""
+
+from ldhp_tamp.primitives.registry import (
+    REGISTRY,
+    ActionInfo,
+    AdjustGraspPrimitive,
+    Binding,
+    DomainInfo,
+    Family,
+    MoveObjectPrimitive,
+    PrimitiveRegistry,
+    Transition,
+    admissibility_predicate,
+    check_against_domain,
+)
+
+# Geometric implementations, imported explicitly so that they register on REGISTRY:
+# (none yet: they come with the TAMP-loop and grasp-graph work)
+
+__all__ = [
+    "REGISTRY",
+    "ActionInfo",
+    "AdjustGraspPrimitive",
+    "Binding",
+    "DomainInfo",
+    "Family",
+    "MoveObjectPrimitive",
+    "PrimitiveRegistry",
+    "Transition",
+    "admissibility_predicate",
+    "check_against_domain",
+]

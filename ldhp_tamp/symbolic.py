@@ -1,0 +1,720 @@
+"""The top tier's symbolic stage: PDDL domain, contact-graph problems, engines, plans.
+
+The only module of the project that imports :mod:`unified_planning`. Data flows through
+plain functions over small values, as in pyperplan::
+
+    domain = load_domain("ldhp")                        # parse the file once
+    check_against_domain(domain.info, REGISTRY)         # before any search
+    graph = ContactGraph(states, transitions, start, goal, start_touching, goal_release)
+    problem = build_problem(domain, graph, forbidden)   # model API, ~2 ms
+    result = solve(problem, engine="pyperplan")         # SymbolicResult with a status
+    emit_pddl(out_dir, problem, iteration)              # --emit-pddl DIR
+
+The domain file is parsed once into a *template* problem (its types, predicates and
+actions); each problem is a clone of the template to which the contact states (objects),
+the initial facts and the goal are added through unified-planning's model API, which is
+two orders of magnitude faster than writing and re-parsing problem text.
+
+Encoding (see ``domains/ldhp.pddl`` and ``docs/design/symbolic.md``): one object of type
+``state`` per contact state (``s-l1-e1``); ``(at s)`` for the start; ``(touching)`` or
+``(hand-free)``; one static fact ``(can-<a> from to)`` per admissible transition of each
+MoveObject action ``<a>`` that the TAMP loop has not forbidden; the goal ``(at g)`` plus
+``(hand-free)`` with ``goal_release``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+import logging
+import os
+import tempfile
+import threading
+import time
+import types
+import warnings
+from collections.abc import Collection, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import unified_planning.model as up_model
+from unified_planning.engines import PlanGenerationResult, PlanGenerationResultStatus
+from unified_planning.environment import Environment
+from unified_planning.io import PDDLReader, PDDLWriter
+from unified_planning.shortcuts import get_environment
+
+from geometry.features import ContactState
+from ldhp_tamp.errors import DomainError, EngineError
+from ldhp_tamp.primitives.registry import (
+    ActionInfo,
+    DomainInfo,
+    Family,
+    Transition,
+    admissibility_predicate,
+)
+from ldhp_tamp.resources import domains_dir
+from ldhp_tamp.scenario import find_domain
+
+__all__ = [
+    "ContactGraph",
+    "GroundAction",
+    "SymbolicDomain",
+    "SymbolicProblem",
+    "SymbolicResult",
+    "SymbolicStatus",
+    "Transition",
+    "available_engines",
+    "build_problem",
+    "emit_pddl",
+    "load_domain",
+    "parse_domain",
+    "solve",
+]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_ENGINE = "pyperplan"
+
+#: The problem vocabulary every domain must declare (see ``domains/ldhp.pddl``).
+STATE_TYPE = "state"
+AT = "at"
+TOUCHING = "touching"
+HAND_FREE = "hand-free"
+
+_TOTAL_COST = "total-cost"
+
+# Fast Downward's driver writes ``output.sas`` into the working directory, so every solve
+# runs in a private temporary directory; the working directory belongs to the process,
+# hence one solve at a time per process.
+_SOLVE_LOCK = threading.Lock()
+
+
+def _environment() -> Environment:
+    """unified-planning's global environment, credits banner off.
+
+    The global one, not a private ``Environment()``: up-fast-downward builds expressions
+    in the global environment, so ``fast-downward-opt`` fails on problems of any other.
+    """
+    env = get_environment()
+    env.credits_stream = None
+    return env
+
+
+# --------------------------------------------------------------------------- engines
+
+
+def available_engines() -> tuple[str, ...]:
+    """Names of the installed one-shot planning engines, sorted. Prints nothing.
+
+    Meta-engines (``replanner[...]``, ``oversubscription[...]``) are left out: they solve
+    other kinds of problems than the contact-state tier's.
+
+    Returns
+    -------
+    tuple of str
+        e.g. ``("fast-downward", "fast-downward-opt", "pyperplan", "pyperplan-opt")``.
+    """
+    factory = _environment().factory
+    return tuple(sorted(n for n in factory.engines
+                        if "[" not in n and factory.engine(n).is_oneshot_planner()))
+
+
+def _check_engine(domain: SymbolicDomain, engine: str) -> None:
+    """Refuse an unknown engine, or one that does not support the domain's features.
+
+    Raises
+    ------
+    EngineError
+        Naming the installed engines, or those that support the domain.
+    """
+    installed = available_engines()
+    if engine not in installed:
+        raise EngineError(f"unknown planning engine {engine!r}; installed: {', '.join(installed)}")
+    factory = _environment().factory
+    kind = domain.kind
+    if factory.engine(engine).supports(kind):
+        return
+    able = [e for e in installed if factory.engine(e).supports(kind)]
+    what = ("declares action costs, which it would ignore" if domain.uses_action_costs
+            else f"uses features it does not support ({', '.join(sorted(kind.features))})")
+    raise EngineError(f"engine {engine!r} cannot solve domain {domain.info.source}: the domain "
+                      f"{what}; engines that can: {', '.join(able) or 'none installed'}")
+
+
+# --------------------------------------------------------------------------- domain
+
+
+@dataclass(frozen=True, eq=False)
+class SymbolicDomain:
+    """A parsed PDDL domain: the primitive library, ready to build problems from.
+
+    Attributes
+    ----------
+    info
+        The actions and their families, for the registry check.
+    uses_action_costs
+        The domain declares ``total-cost``; engines that ignore costs are refused.
+    grasp_makers, releasers
+        The actions that make ``(touching)``, resp. ``(hand-free)``, true; used to
+        explain an unsolvable problem (e.g. no ``approach-contact`` in the domain).
+    template, kind
+        The unified-planning problem every problem is cloned from, and its problem
+        kind (what an engine must support). Only this module touches them.
+    """
+
+    info: DomainInfo
+    uses_action_costs: bool
+    grasp_makers: tuple[str, ...]
+    releasers: tuple[str, ...]
+    template: up_model.Problem = field(repr=False)
+    kind: up_model.ProblemKind = field(repr=False)
+
+
+def load_domain(domain: str | Path, base: Path | None = None) -> SymbolicDomain:
+    """Read and check a domain: a shipped domain's name (``"ldhp"``) or a ``.pddl`` path.
+
+    Names and relative paths are resolved by :func:`ldhp_tamp.scenario.find_domain`
+    (relative to ``base``, default the working directory), as for a scenario's
+    ``planner.domain``; a loaded scenario's ``settings.domain_path`` is already resolved.
+
+    Raises
+    ------
+    DomainError
+        Unknown domain, unreadable file, PDDL syntax error (with the line when
+        unified-planning gives it), or a broken convention (see :func:`parse_domain`).
+    """
+    path = find_domain(str(domain), base)
+    if path is None:
+        raise DomainError(f"domain not found: {domain} (neither a shipped domain in "
+                          f"{domains_dir()} nor an existing .pddl file)")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DomainError(f"{path}: cannot read domain: {exc}") from exc
+    return parse_domain(text, source=str(path))
+
+
+def parse_domain(text: str, source: str = "<string>") -> SymbolicDomain:
+    """Parse PDDL domain text; the string twin of :func:`load_domain`.
+
+    Checks the conventions of ``domains/ldhp.pddl``: a type ``state``; predicates
+    ``(at ?s - state)``, ``(touching)``, ``(hand-free)``; only instantaneous actions;
+    every MoveObject action ``<a>`` (one whose effects change ``at``) requires
+    ``(can-<a> ?from ?to)`` on two ``state`` parameters; no action changes a ``can-*``
+    predicate.
+
+    Raises
+    ------
+    DomainError
+        Naming ``source``, and the line and column of a syntax error when known.
+    """
+    env = _environment()
+    template = _parse(env, text, None, source)
+    if template.has_fluent(_TOTAL_COST):
+        # Parse again with a problem asking to minimise total-cost, so that
+        # unified-planning turns the increase effects into action costs (its problem
+        # kind then shows ACTION_COSTS and engines that ignore them can be refused).
+        name = template.name
+        stub = (f"(define (problem {name}) (:domain {name})\n"
+                f" (:init (= ({_TOTAL_COST}) 0)) (:goal (and))\n"
+                f" (:metric minimize ({_TOTAL_COST})))")
+        template = _parse(env, text, stub, source)
+        template.name = name
+    info = _describe(template, source)
+    return SymbolicDomain(
+        info=info,
+        uses_action_costs=bool(template.quality_metrics),
+        grasp_makers=_adders(template, TOUCHING),
+        releasers=_adders(template, HAND_FREE),
+        template=template,
+        kind=template.kind,
+    )
+
+
+def _parse(env: Environment, domain_text: str, problem_text: str | None,
+           source: str) -> up_model.Problem:
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return PDDLReader(env).parse_problem_string(domain_text, problem_text)
+    except Exception as exc:  # the reader raises pyparsing, SyntaxError, UP and others
+        line, col = getattr(exc, "lineno", None), getattr(exc, "col", None)
+        where = f"{source}:{line}:{col}" if line is not None else source
+        message = getattr(exc, "msg", None) if line is not None else None
+        raise DomainError(f"{where}: PDDL error: {message or exc}") from exc
+
+
+def _conjuncts(node: up_model.FNode) -> Iterator[up_model.FNode]:
+    if node.is_and():
+        for arg in node.args:
+            yield from _conjuncts(arg)
+    else:
+        yield node
+
+
+def _precondition_atoms(action: up_model.InstantaneousAction) -> Iterator[up_model.FNode]:
+    """The conjuncts of an action's precondition, ``and`` flattened."""
+    for pre in action.preconditions:
+        yield from _conjuncts(pre)
+
+
+def _describe(template: up_model.Problem, source: str) -> DomainInfo:
+    """Read the actions, derive their families and check the conventions."""
+    where = f"{source}: "
+    if not template.has_type(STATE_TYPE):
+        raise DomainError(where + f"the domain declares no type {STATE_TYPE!r} "
+                          "(one object per contact state)")
+    state = template.user_type(STATE_TYPE)
+    for name, arity in ((AT, 1), (TOUCHING, 0), (HAND_FREE, 0)):
+        fluent = template.fluent(name) if template.has_fluent(name) else None
+        if (fluent is None or fluent.arity != arity or not fluent.type.is_bool_type()
+                or any(p.type != state for p in fluent.signature)):
+            shape = "(at ?s - state)" if arity else f"({name})"
+            raise DomainError(where + f"the domain must declare the predicate {shape}: "
+                              "the problem builder writes the start and goal with it")
+    static = {admissibility_predicate(a.name) for a in template.actions}
+    actions: list[ActionInfo] = []
+    for action in template.actions:
+        if not isinstance(action, up_model.InstantaneousAction):
+            raise DomainError(where + f"action {action.name!r} is not instantaneous")
+        changed = {e.fluent.fluent().name for e in action.effects}
+        touched_static = sorted(changed & static)
+        if touched_static:
+            raise DomainError(where + f"action {action.name!r} changes {touched_static[0]}, "
+                              "but can-* predicates are static: the planner writes them")
+        family = Family.MOVE_OBJECT if AT in changed else Family.ADJUST_GRASP
+        params = tuple(p.name for p in action.parameters)
+        actions.append(ActionInfo(action.name, family, params,
+                                  _admissibility(template, action, state)))
+    return DomainInfo(name=template.name, source=source, actions=tuple(actions))
+
+
+def _admissibility(template: up_model.Problem, action: up_model.InstantaneousAction,
+                   state: up_model.Type) -> tuple[int, int] | None:
+    """Parameter indices of ``(can-<action> ?from ?to)`` in the precondition, if any."""
+    predicate = admissibility_predicate(action.name)
+    if not template.has_fluent(predicate):
+        return None
+    fluent = template.fluent(predicate)
+    if fluent.arity != 2 or any(p.type != state for p in fluent.signature):
+        return None
+    names = [p.name for p in action.parameters]
+    for atom in _precondition_atoms(action):
+        if (atom.is_fluent_exp() and atom.fluent() == fluent
+                and all(a.is_parameter_exp() for a in atom.args)):
+            i, j = (names.index(a.parameter().name) for a in atom.args)
+            if i != j:
+                return (i, j)
+    return None
+
+
+def _adders(template: up_model.Problem, name: str) -> tuple[str, ...]:
+    """Actions that can make the 0-ary predicate ``name`` true while it is false: an
+    effect sets it and no precondition requires it already."""
+    fluent = template.fluent(name)
+    return tuple(
+        a.name for a in template.actions
+        if any(e.fluent.fluent() == fluent and e.value.is_true() for e in a.effects)
+        and not any(atom.is_fluent_exp() and atom.fluent() == fluent
+                    for atom in _precondition_atoms(a)))
+
+
+# --------------------------------------------------------------------------- problems
+
+
+@dataclass(frozen=True)
+class ContactGraph:
+    """The contact-state graph of one task: the input of the symbolic tier.
+
+    Attributes
+    ----------
+    states
+        Every contact state the graph knows, ``FREE`` included if air-moves are used.
+    transitions
+        MoveObject action name -> its admissible ``(from_state, to_state)`` pairs
+        (:meth:`PrimitiveRegistry.admissible_transitions` computes it). An action of
+        the domain missing here has no admissible transition; an entry for an action
+        the domain does not declare is ignored (the primitive was removed).
+    start, goal
+        The contact states of the start and goal contact poses T'0 and T'g.
+    start_touching
+        The object starts held (a ``start_grasp``); otherwise the hand starts free.
+    goal_release
+        The gripper must end out of contact with the object.
+
+    Raises
+    ------
+    ValueError
+        Duplicate states, or a start, goal or transition endpoint not in ``states``
+        (a bug of the code that built the graph, not a user error).
+    """
+
+    states: tuple[ContactState, ...]
+    transitions: Mapping[str, frozenset[tuple[ContactState, ContactState]]]
+    start: ContactState
+    goal: ContactState
+    start_touching: bool = False
+    goal_release: bool = False
+
+    def __post_init__(self) -> None:
+        known = set(self.states)
+        if len(known) != len(self.states):
+            raise ValueError("ContactGraph.states has duplicates")
+        for what, s in (("start", self.start), ("goal", self.goal)):
+            if s not in known:
+                raise ValueError(f"ContactGraph.{what} {s} is not among the states")
+        frozen = {name.lower(): frozenset(pairs) for name, pairs in self.transitions.items()}
+        for name, pairs in frozen.items():
+            for a, b in pairs:
+                if a not in known or b not in known:
+                    raise ValueError(f"transition {name} {a} -> {b}: state not in the graph")
+        object.__setattr__(self, "transitions", types.MappingProxyType(frozen))
+
+    def all_transitions(self) -> frozenset[Transition]:
+        """Every admissible transition as a :class:`Transition`."""
+        return frozenset(Transition(name, a, b)
+                         for name, pairs in self.transitions.items() for a, b in pairs)
+
+
+@dataclass(frozen=True, eq=False)
+class SymbolicProblem:
+    """One top-tier problem: a contact graph, minus forbidden transitions, as PDDL.
+
+    Attributes
+    ----------
+    domain, graph
+        What it was built from.
+    forbidden
+        The forbidden transitions that the graph did admit (their facts are omitted).
+    admitted
+        Number of ``can-*`` facts written.
+    up_problem
+        The unified-planning problem. Only this module touches it.
+    """
+
+    domain: SymbolicDomain
+    graph: ContactGraph
+    forbidden: frozenset[Transition]
+    admitted: int
+    up_problem: up_model.Problem = field(repr=False)
+    states_by_name: Mapping[str, ContactState] = field(repr=False)
+
+
+def build_problem(domain: SymbolicDomain, graph: ContactGraph,
+                  forbidden: Collection[Transition] = frozenset()) -> SymbolicProblem:
+    """Build the PDDL problem of ``graph`` through the model API, without ``forbidden``.
+
+    Only true facts are written (the admissible transitions), so the problem grows with
+    the number of transitions, not with the square of the number of states.
+
+    Parameters
+    ----------
+    domain
+        From :func:`load_domain`, parsed once per run.
+    graph
+        States, admissible transitions, start, goal and the hand at both ends.
+    forbidden
+        Transitions the TAMP loop found unrealisable; their ``can-*`` facts are left out,
+        so no engine can use them again (feedback works with every engine).
+    """
+    env = _environment()
+    em = env.expression_manager
+    problem = domain.template.clone()
+    problem.name = domain.info.name
+    state_type = problem.user_type(STATE_TYPE)
+    objects = {s: up_model.Object(s.pddl_name, state_type, env) for s in graph.states}
+    problem.add_objects(objects.values())
+    at = problem.fluent(AT)
+    problem.set_initial_value(em.FluentExp(at, [objects[graph.start]]), True)
+    problem.set_initial_value(
+        em.FluentExp(problem.fluent(TOUCHING if graph.start_touching else HAND_FREE)), True)
+
+    banned = frozenset(forbidden)
+    used: set[Transition] = set()
+    admitted = 0
+    declared = domain.info.names(Family.MOVE_OBJECT)
+    for name in sorted(set(graph.transitions) - set(declared)):
+        log.debug("transitions of %r ignored: the domain has no such MoveObject action", name)
+    for name in declared:
+        predicate = problem.fluent(admissibility_predicate(name))
+        pairs = sorted(graph.transitions.get(name, ()),
+                       key=lambda p: (p[0].pddl_name, p[1].pddl_name))
+        for a, b in pairs:
+            if Transition(name, a, b) in banned:
+                used.add(Transition(name, a, b))
+                continue
+            problem.set_initial_value(em.FluentExp(predicate, [objects[a], objects[b]]), True)
+            admitted += 1
+
+    problem.add_goal(em.FluentExp(at, [objects[graph.goal]]))
+    if graph.goal_release:
+        problem.add_goal(em.FluentExp(problem.fluent(HAND_FREE)))
+    for t in sorted(banned - used, key=str):
+        log.debug("forbidden transition %s is not in the graph", t)
+    return SymbolicProblem(
+        domain=domain, graph=graph, forbidden=frozenset(used), admitted=admitted,
+        up_problem=problem,
+        states_by_name=types.MappingProxyType({s.pddl_name: s for s in graph.states}),
+    )
+
+
+# --------------------------------------------------------------------------- results
+
+
+class SymbolicStatus(enum.Enum):
+    """How a top-tier solve ended. Every engine status maps to one of these."""
+
+    SOLVED = "solved"
+    UNSOLVABLE = "unsolvable"
+    """Proven: no contact-state plan exists with the declared primitives."""
+    NOT_FOUND = "not-found"
+    """An incomplete engine found no plan; one may still exist."""
+    TIMEOUT = "timeout"
+    MEMOUT = "memout"
+    ERROR = "error"
+    """The engine failed, or reported the problem unsupported."""
+
+
+_STATUS = {
+    PlanGenerationResultStatus.SOLVED_SATISFICING: SymbolicStatus.SOLVED,
+    PlanGenerationResultStatus.SOLVED_OPTIMALLY: SymbolicStatus.SOLVED,
+    PlanGenerationResultStatus.UNSOLVABLE_PROVEN: SymbolicStatus.UNSOLVABLE,
+    PlanGenerationResultStatus.UNSOLVABLE_INCOMPLETELY: SymbolicStatus.NOT_FOUND,
+    PlanGenerationResultStatus.TIMEOUT: SymbolicStatus.TIMEOUT,
+    PlanGenerationResultStatus.MEMOUT: SymbolicStatus.MEMOUT,
+    PlanGenerationResultStatus.INTERNAL_ERROR: SymbolicStatus.ERROR,
+    PlanGenerationResultStatus.UNSUPPORTED_PROBLEM: SymbolicStatus.ERROR,
+    PlanGenerationResultStatus.INTERMEDIATE: SymbolicStatus.ERROR,
+}
+
+# up-pyperplan 1.1 compares its search *function* with search names when no plan is
+# found, so it always reports UNSOLVABLE_INCOMPLETELY; the searches these engines run
+# (wastar for pyperplan, astar for pyperplan-opt) are exhaustive on a finite task, so
+# their "no plan" is a proof.
+_EXHAUSTIVE_ENGINES = frozenset({"pyperplan", "pyperplan-opt"})
+
+
+@dataclass(frozen=True)
+class GroundAction:
+    """One step of a symbolic plan.
+
+    Attributes
+    ----------
+    name
+        The PDDL action (``"tip"``).
+    family
+        Its family in the domain.
+    args
+        The PDDL object names of its arguments.
+    from_state, to_state
+        For a MoveObject action, the contact states it connects; ``None`` otherwise.
+    """
+
+    name: str
+    family: Family
+    args: tuple[str, ...] = ()
+    from_state: ContactState | None = None
+    to_state: ContactState | None = None
+
+    @property
+    def transition(self) -> Transition | None:
+        """The :class:`Transition` to forbid if this step cannot be realised."""
+        if self.from_state is None or self.to_state is None:
+            return None
+        return Transition(self.name, self.from_state, self.to_state)
+
+    def __str__(self) -> str:
+        return f"({' '.join((self.name, *self.args))})"
+
+
+@dataclass(frozen=True)
+class SymbolicResult:
+    """The outcome of one solve: a status, the plan (empty unless solved), a reason.
+
+    Attributes
+    ----------
+    status
+        See :class:`SymbolicStatus`.
+    actions
+        The plan, in order; MoveObject steps carry their contact states.
+    reason
+        One line for logs and the user: what was found, or why nothing was.
+    time_s
+        Wall time of the engine call (the problem build is not included).
+    engine
+        The engine's name.
+    """
+
+    status: SymbolicStatus
+    actions: tuple[GroundAction, ...]
+    reason: str
+    time_s: float
+    engine: str
+
+    @property
+    def solved(self) -> bool:
+        return self.status is SymbolicStatus.SOLVED
+
+    def transitions(self) -> tuple[Transition, ...]:
+        """The MoveObject steps of the plan, as transitions."""
+        return tuple(t for a in self.actions if (t := a.transition) is not None)
+
+
+@contextlib.contextmanager
+def _private_working_directory() -> Iterator[None]:
+    """Run the body in a fresh temporary directory; restore the working directory."""
+    with tempfile.TemporaryDirectory(prefix="ldhp-solve-") as tmp:
+        previous = os.getcwd()
+        os.chdir(tmp)
+        try:
+            yield
+        finally:
+            os.chdir(previous)
+
+
+def solve(problem: SymbolicProblem, engine: str = DEFAULT_ENGINE,
+          timeout_s: float | None = None) -> SymbolicResult:
+    """Solve a problem with a unified-planning engine chosen by name.
+
+    Every solve runs under a module-wide lock in a private temporary working directory
+    (Fast Downward writes ``output.sas`` into the working directory), so solves never
+    run in parallel within a process and never leave files behind.
+
+    Parameters
+    ----------
+    problem
+        From :func:`build_problem`.
+    engine
+        An entry of :func:`available_engines`: ``pyperplan`` (default),
+        ``fast-downward``, their ``-opt`` variants, or any other installed engine.
+    timeout_s
+        Passed to the engine; engines that cannot enforce it (pyperplan) say so in the log.
+
+    Returns
+    -------
+    SymbolicResult
+        A failed solve is a status with a reason, not an exception.
+
+    Raises
+    ------
+    EngineError
+        Unknown engine (the message lists the installed ones), or an engine that does
+        not support the domain, e.g. one that would ignore its action costs.
+    """
+    _check_engine(problem.domain, engine)
+    factory = _environment().factory
+    start = time.perf_counter()
+    try:
+        with _SOLVE_LOCK, _private_working_directory(), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with factory.OneshotPlanner(name=engine) as planner:
+                planner.skip_checks = True  # _check_engine checked the domain's kind
+                answer = planner.solve(problem.up_problem, timeout=timeout_s)
+    except Exception as exc:  # any engine failure is a result, not a crash
+        elapsed = time.perf_counter() - start
+        log.warning("engine %s failed: %s", engine, exc)
+        return SymbolicResult(SymbolicStatus.ERROR, (), f"engine {engine} failed: {exc}",
+                              elapsed, engine)
+    elapsed = time.perf_counter() - start
+    for w in caught:
+        log.info("engine %s: %s", engine, w.message)
+    return _result(problem, answer, engine, elapsed, timeout_s)
+
+
+def _result(problem: SymbolicProblem, answer: PlanGenerationResult, engine: str,
+            elapsed: float, timeout_s: float | None) -> SymbolicResult:
+    status = _STATUS.get(answer.status, SymbolicStatus.ERROR)
+    if status is SymbolicStatus.NOT_FOUND and engine in _EXHAUSTIVE_ENGINES:
+        status = SymbolicStatus.UNSOLVABLE
+    if status is SymbolicStatus.SOLVED and answer.plan is not None:
+        actions = tuple(_ground(problem, ai) for ai in answer.plan.actions)
+        moves = " ".join(f"-{a.name}-> {a.to_state.pddl_name}" for a in actions
+                         if a.to_state is not None)
+        reason = (f"{engine}: {len(actions)} action(s) from "
+                  f"{problem.graph.start.pddl_name} {moves}".rstrip())
+        log.debug("%s", reason)
+        return SymbolicResult(status, actions, reason, elapsed, engine)
+    if status is SymbolicStatus.SOLVED:  # a "solution" without a plan: treat as an error
+        status = SymbolicStatus.ERROR
+    reason = {
+        SymbolicStatus.UNSOLVABLE: _no_path(problem),
+        SymbolicStatus.NOT_FOUND: f"{engine} found no plan (its search is incomplete): "
+                                  + _no_path(problem),
+        SymbolicStatus.TIMEOUT: f"{engine} hit the time limit of {timeout_s} s",
+        SymbolicStatus.MEMOUT: f"{engine} ran out of memory",
+    }.get(status, f"{engine} reported {answer.status.name}: {_last_log(answer)}")
+    log.info("%s", reason)
+    return SymbolicResult(status, (), reason, elapsed, engine)
+
+
+def _ground(problem: SymbolicProblem, instance: up_model.ActionInstance) -> GroundAction:
+    info = problem.domain.info.action(instance.action.name)
+    args = tuple(p.object().name for p in instance.actual_parameters)
+    if info.admissibility is None:
+        return GroundAction(info.name, info.family, args)
+    i, j = info.admissibility
+    states = problem.states_by_name
+    return GroundAction(info.name, info.family, args, states[args[i]], states[args[j]])
+
+
+def _no_path(problem: SymbolicProblem) -> str:
+    """Why no plan exists, in the words of the encoding."""
+    graph, domain = problem.graph, problem.domain
+    moves = ", ".join(domain.info.names(Family.MOVE_OBJECT)) or "none"
+    text = (f"no contact-state path from {graph.start.pddl_name} to {graph.goal.pddl_name}"
+            f"{' ending with the hand free' if graph.goal_release else ''}"
+            f" with the declared primitives (MoveObject: {moves}; {problem.admitted} "
+            f"admissible transition(s), {len(problem.forbidden)} forbidden)")
+    if not graph.start_touching and not domain.grasp_makers:
+        text += f"; the hand starts free and no action makes ({TOUCHING}) true"
+    if graph.goal_release and not domain.releasers:
+        text += f"; the goal releases the object but no action makes ({HAND_FREE}) true"
+    return text
+
+
+def _last_log(answer: PlanGenerationResult) -> str:
+    lines = [ln for m in answer.log_messages or () for ln in m.message.splitlines() if ln.strip()]
+    return lines[-1] if lines else "no message"
+
+
+# --------------------------------------------------------------------------- --emit-pddl
+
+
+def emit_pddl(directory: str | Path, problem: SymbolicProblem, iteration: int) -> Path:
+    """Write ``domain.pddl`` and ``problem-NN.pddl`` of one top-tier iteration.
+
+    Both are written by unified-planning's PDDLWriter, so the problem refers to the
+    domain by the writer's name (``ldhp-domain``) and any planner can re-read the pair.
+    A comment header names the source domain, the iteration, and the transitions
+    forbidden so far (their ``can-*`` facts are absent from ``:init``).
+
+    Parameters
+    ----------
+    directory
+        Created if missing.
+    problem
+        From :func:`build_problem`.
+    iteration
+        1-based top-tier iteration: ``problem-01.pddl``, ``problem-02.pddl``, ...
+
+    Returns
+    -------
+    Path
+        The problem file written.
+    """
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    writer = PDDLWriter(problem.up_problem)
+    source = problem.domain.info.source
+    (out / "domain.pddl").write_text(
+        f"; domain {problem.domain.info.name} from {source}, written by ldhp-tamp\n"
+        + writer.get_domain(), encoding="utf-8")
+    header = [f"; top-tier iteration {iteration} of domain {problem.domain.info.name}",
+              f"; start {problem.graph.start.pddl_name}, goal {problem.graph.goal.pddl_name}",
+              f"; {problem.admitted} admissible transition(s); "
+              f"forbidden after failed refinements: {len(problem.forbidden)}"]
+    header += [f";   forbidden: ({t})" for t in sorted(problem.forbidden, key=str)]
+    path = out / f"problem-{iteration:02d}.pddl"
+    path.write_text("\n".join(header) + "\n" + writer.get_problem(), encoding="utf-8")
+    log.info("wrote %s", path)
+    return path
