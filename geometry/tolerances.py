@@ -12,7 +12,9 @@ from __future__ import annotations
 #: Two features closer than this (mm) are in contact (planner side).
 CONTACT_TOL: float = 0.1
 
-#: Largest overlap depth (mm) the planner tolerates between bodies that touch.
+#: Overlap tolerance (mm) of the planner's checks, in the plan spec's sense (rule 3): two
+#: bodies overlap when their intersection eroded by this much is non-empty. A thin strip
+#: of overlap is thus tolerated up to twice this depth.
 PENETRATION_TOL: float = 0.1
 
 #: Overlap tolerance (mm) used when a sweep bisects for the exact parameter where a new

@@ -22,7 +22,7 @@ from ldhp_tamp.primitives.registry import (
 )
 
 # Geometric implementations, imported explicitly so that they register on REGISTRY:
-# (none yet: they come with the TAMP-loop and grasp-graph work)
+from ldhp_tamp.primitives import move_object  # noqa: E402,F401  tip, push, biplanar-slide, air-move
 
 __all__ = [
     "REGISTRY",

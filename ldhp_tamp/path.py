@@ -1,0 +1,91 @@
+"""Object-pose paths: the values the top tier hands to the bottom tier.
+
+A :class:`Segment` is one MoveObject primitive instance m_k: a motion family of
+:mod:`geometry.kinematics` with the parameter interval it covers, the contact states at
+its ends, the primitive's parameters as they appear in a plan, and its dense pose samples
+(no object vertex moves more than ``WAYPOINT_STEP`` between samples). A pose path
+T_0..T_n is a tuple of segments whose ends join.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import Any, Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from geometry.contacts import contact_state
+from geometry.features import ContactState
+from geometry.kinematics import Motion, MotionKind, dense_parameters
+from geometry.poses import Pose
+from geometry.tolerances import WAYPOINT_STEP
+from geometry.world import World
+
+FloatArray = NDArray[np.float64]
+
+#: MoveObject primitives whose segments the bottom tier may bisect (paper: dichotomy
+#: refinement of contact-sensitive segments).
+REFINABLE = frozenset({"tip", "biplanar-slide"})
+
+
+@dataclass(frozen=True, eq=False)
+class Segment:
+    """One MoveObject primitive instance: ``motion`` from parameter ``s0`` to ``s1``."""
+
+    primitive: str
+    from_state: ContactState
+    to_state: ContactState
+    motion: Motion
+    s0: float
+    s1: float
+    world: World = field(repr=False)
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    depth: int = 0  # how many bisections produced this segment
+    step: int = -1  # index of the planned symbolic transition this segment realises
+
+    @cached_property
+    def parameter_values(self) -> FloatArray:
+        return dense_parameters(self.world, self.motion, self.s0, self.s1, WAYPOINT_STEP)
+
+    @cached_property
+    def poses(self) -> FloatArray:
+        """Dense object poses (J + 1, 3) from the start to the end of the segment."""
+        p = self.motion.poses(self.parameter_values)
+        p.setflags(write=False)
+        return p
+
+    @property
+    def start(self) -> Pose:
+        return Pose.from_array(self.poses[0])
+
+    @property
+    def end(self) -> Pose:
+        return Pose.from_array(self.poses[-1])
+
+    @property
+    def refinable(self) -> bool:
+        return self.primitive in REFINABLE
+
+    def split(self) -> tuple["Segment", "Segment"]:
+        """Bisect the parameter range (paper: dichotomy refinement)."""
+        mid = 0.5 * (self.s0 + self.s1)
+        mid_state = contact_state(self.world, self.motion.pose(mid))
+        half = abs(self.s1 - self.s0) / 2.0
+        params = dict(self.parameters)
+        key = "angle" if self.motion.kind is not MotionKind.TRANSLATE else "travel"
+        if key in params:
+            params[key] = math.degrees(half) if key == "angle" else half
+        a = replace(self, to_state=mid_state, s1=mid, parameters=params, depth=self.depth + 1)
+        b = replace(self, from_state=mid_state, s0=mid, parameters=params, depth=self.depth + 1)
+        return a, b
+
+
+def check_joined(segments: tuple[Segment, ...], tol: float = 1e-6) -> None:
+    """Raise ``ValueError`` unless consecutive segments join (end pose = next start)."""
+    for a, b in zip(segments, segments[1:]):
+        if not np.allclose(a.poses[-1], b.poses[0], atol=tol):
+            raise ValueError(f"segments do not join: {a.primitive} ends at {a.poses[-1]}, "
+                             f"{b.primitive} starts at {b.poses[0]}")

@@ -1,0 +1,294 @@
+"""The MoveObject primitives: ``tip``, ``push``, ``biplanar-slide``, ``air-move``.
+
+Each implementation lists the motion families it can start at a pose (pivots and senses
+for ``tip``, edge directions for ``push``, pairs of kept contacts and senses for
+``biplanar-slide``; see :mod:`geometry.kinematics`). Two uses:
+
+- ``transitions(ctx)``: sweep every family from a few witness poses of every contact
+  state; every pair of consecutive states met is a kinematically admissible transition
+  (a static fact ``(can-<action> from to)`` of the PDDL problem).
+- ``sample(ctx, from_state, to_state, start_pose, rng, limit)``: the stream. Sweep every
+  family from the actual pose T_k; where the sweep leaves ``from_state`` directly into
+  ``to_state``, propose end parameters: the end of the sweep where a new contact is made,
+  or, when ``to_state`` holds over an interval, a few values in it (its two ends less a
+  margin, its middle, and the value closest to the goal), ranked by the distance of the
+  resulting pose to the goal contact pose T'_g (paper: samples limited and ranked by a
+  light heuristic).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import TYPE_CHECKING, Any, Iterator
+
+import numpy as np
+
+from geometry.contacts import contact_points, principal_contacts
+from geometry.features import FREE, Contact, ContactKind, ContactState
+from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, kept_contact_holds, rotate_about, sweep, translate, two_contact
+from geometry.poses import Pose, wrap_angle
+from geometry.world import World
+from ldhp_tamp.path import Segment
+from ldhp_tamp.primitives.registry import REGISTRY, Family
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ldhp_tamp.contact_graph import PlanningContext
+
+log = logging.getLogger(__name__)
+
+#: A state piece shorter than this (mm of vertex motion) is a single instant.
+INSTANT_MM = 0.5
+#: Margin (mm of vertex motion) kept from the ends of an interval state.
+MARGIN_MM = 2.0
+#: Sampling step (mm of vertex motion) of the sweeps that find admissible transitions:
+#: coarser than a stream's, since only the order of the states met matters there.
+TRANSITION_STEP_MM = 3.0
+
+Family_ = tuple[Motion, float, dict[str, Any]]
+
+
+def _point_name(world: World, pose: Pose, point: np.ndarray) -> str:
+    """The feature name of a contact point: the object vertex or environment vertex it
+    coincides with, else the world point itself."""
+    verts = world.object_vertices(pose)
+    d = np.linalg.norm(verts - point, axis=1)
+    if d.min() < 1e-3:
+        return world.object.vertex_names[int(d.argmin())]
+    d = np.linalg.norm(world.environment.vertices - point, axis=1)
+    if d.min() < 1e-3:
+        return world.environment.vertex_names[int(d.argmin())]
+    return f"({point[0]:.1f}, {point[1]:.1f})"
+
+
+def _consecutive_pairs(sw: Sweep) -> set[tuple[ContactState, ContactState]]:
+    st = sw.states
+    return {(a, b) for a, b in zip(st, st[1:]) if a != b}
+
+
+def _sense_name(sense: int) -> str:
+    return "ccw" if sense > 0 else "cw"
+
+
+class _Swept:
+    """Shared machinery of the sweep-based MoveObject primitives."""
+
+    name = ""
+
+    def families(self, ctx: PlanningContext, pose: Pose) -> list[Family_]:  # pragma: no cover
+        raise NotImplementedError
+
+    def transitions(self, ctx: PlanningContext) -> set[tuple[ContactState, ContactState]]:
+        pairs: set[tuple[ContactState, ContactState]] = set()
+        for state in ctx.states:
+            if state.is_free:
+                continue
+            for pose in ctx.witness_poses(state):
+                for motion, s_max, _ in self.families(ctx, pose):
+                    sw = sweep(ctx.world, motion, s_max, step_mm=TRANSITION_STEP_MM, refine_bits=16)
+                    pairs |= _consecutive_pairs(sw)
+        return pairs
+
+    def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
+               start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment]:
+        scored: list[tuple[float, int, Segment]] = []
+        for motion, s_max, params in self.families(ctx, start_pose):
+            sw = sweep(ctx.world, motion, s_max)
+            for s_end in _end_values(ctx, sw, from_state, to_state):
+                seg = self._segment(ctx, motion, s_end, from_state, to_state, params)
+                score = float(ctx.goal_distance(seg.poses[-1:])[0])
+                scored.append((score, len(scored), seg))
+        scored.sort(key=lambda t: (t[0], t[1]))
+        for _, _, seg in scored[:limit]:
+            yield seg
+
+    def _segment(self, ctx: PlanningContext, motion: Motion, s_end: float, from_state: ContactState,
+                 to_state: ContactState, params: dict[str, Any]) -> Segment:
+        p = dict(params)
+        if motion.kind is MotionKind.TRANSLATE:
+            p["travel"] = round(s_end, 6)
+        else:
+            p["angle"] = round(math.degrees(s_end), 6)
+        return Segment(self.name, from_state, to_state, motion, 0.0, s_end, ctx.world, p)
+
+
+def _end_values(ctx: PlanningContext, sw: Sweep, from_state: ContactState, to_state: ContactState) -> list[float]:
+    """End parameters where ``sw`` goes from ``from_state`` straight into ``to_state``."""
+    pieces = sw.pieces
+    if not pieces or pieces[0].state != from_state:
+        return []
+    speed = max(sw.motion.vertex_speed(ctx.world), 1e-9)
+    for k in range(1, len(pieces)):
+        if pieces[k].state == from_state:
+            continue
+        if pieces[k].state != to_state:
+            return []
+        a, b = pieces[k].s0, pieces[k].s1
+        last = k == len(pieces) - 1
+        if (b - a) * speed < INSTANT_MM:
+            return [b] if last and sw.end is SweepEnd.BLOCKED else [0.5 * (a + b)]
+        m = min(MARGIN_MM / speed, (b - a) / 4.0)
+        values = [b - m, 0.5 * (a + b), a + m]
+        if last and sw.end is SweepEnd.BLOCKED:
+            values.insert(0, b)
+        values.append(_goal_value(ctx, sw.motion, a + m, b - m))
+        return values
+    return []
+
+
+def _goal_value(ctx: PlanningContext, motion: Motion, lo: float, hi: float) -> float:
+    """The parameter in [lo, hi] whose pose is closest to the goal contact pose T'_g:
+    exact for a rotation (the goal's orientation) and a translation (the projection of
+    the goal's position), a 64-point grid search for a two-contact motion."""
+    g = ctx.goal_contact.pose
+    if motion.kind is MotionKind.ROTATE:
+        s = float(wrap_angle(motion.sense * (g.theta - motion.start.theta)) % (2 * math.pi))
+    elif motion.kind is MotionKind.TRANSLATE:
+        d = np.asarray(motion.direction)
+        s = float(np.dot([g.x - motion.start.x, g.y - motion.start.y], d))
+    else:
+        grid = np.linspace(lo, hi, 64)
+        return float(grid[int(np.argmin(ctx.goal_distance(motion.poses(grid))))])
+    if lo <= s <= hi:
+        return s
+    grid = np.array([lo, hi])
+    return float(grid[int(np.argmin(ctx.goal_distance(motion.poses(grid))))])
+
+
+def _point_contacts(world: World, pose: Pose) -> list[Contact]:
+    """The principal contacts at ``pose`` as point contacts a motion can keep: vertex-edge
+    and edge-vertex as they are; an edge-edge contact as the vertex-edge contacts of the
+    object vertices that lie on the environment edge and the edge-vertex contacts of the
+    convex environment vertices that lie on the object edge."""
+    env = world.environment
+    n = world.object.n
+    out: list[Contact] = []
+    p = pose.as_array()[None]
+    for c in principal_contacts(world, pose):
+        if c.kind is not ContactKind.EDGE_EDGE:
+            out.append(c)
+            continue
+        for i in (c.obj, (c.obj + 1) % n):
+            cand = Contact(ContactKind.VERTEX_EDGE, i, c.env)
+            if kept_contact_holds(world, cand, p)[0]:
+                out.append(cand)
+        solid_next = c.env + 1 if c.env + 1 < env.m and env.edge_solid[c.env + 1] == env.edge_solid[c.env] else None
+        ends = [c.env] + ([solid_next] if solid_next is not None else [])
+        for k in ends:
+            if env.vertex_convex[k]:
+                cand = Contact(ContactKind.EDGE_VERTEX, c.obj, k)
+                if kept_contact_holds(world, cand, p)[0]:
+                    out.append(cand)
+    return list(dict.fromkeys(out))
+
+
+def _line_direction(world: World, c: Contact, pose: Pose) -> np.ndarray:
+    """Tangent of the line a kept point contact stays on, at ``pose``."""
+    if c.kind is ContactKind.VERTEX_EDGE:
+        return world.environment.edge_directions[c.env]
+    return pose.apply_vector(world.object.polygon.edge_directions[c.obj])
+
+
+@REGISTRY.register("tip", Family.MOVE_OBJECT)
+class Tip(_Swept):
+    """Rotate the object about a sticking contact point: an object vertex on an
+    environment edge, or a convex environment vertex on an object edge."""
+
+    name = "tip"
+
+    def families(self, ctx: PlanningContext, pose: Pose) -> list[Family_]:
+        cp = contact_points(ctx.world, pose)
+        pts = np.unique(np.round(cp.points, 9), axis=0) if len(cp) else np.empty((0, 2))
+        out: list[Family_] = []
+        for pt in pts:
+            name = _point_name(ctx.world, pose, pt)
+            for sense in (-1, 1):
+                out.append((rotate_about(pose, pt, sense), math.pi,
+                            {"pivot": name, "sense": _sense_name(sense)}))
+        return out
+
+
+@REGISTRY.register("push", Family.MOVE_OBJECT)
+class Push(_Swept):
+    """Translate the object along an environment edge it rests on, keeping that contact."""
+
+    name = "push"
+
+    def families(self, ctx: PlanningContext, pose: Pose) -> list[Family_]:
+        world = ctx.world
+        kept_by_edge: dict[int, list[Contact]] = {}
+        for c in _point_contacts(world, pose):
+            if c.kind is ContactKind.VERTEX_EDGE:
+                kept_by_edge.setdefault(c.env, []).append(c)
+        out: list[Family_] = []
+        for j, kept in sorted(kept_by_edge.items()):
+            d = world.environment.edge_directions[j]
+            for sign in (1.0, -1.0):
+                m = translate(pose, sign * d)
+                m = Motion(m.kind, m.start, 1, direction=m.direction, kept=tuple(kept))
+                out.append((m, ctx.reach, {"edge": world.environment.edge_names[j],
+                                           "direction": [round(float(sign * d[0]), 6), round(float(sign * d[1]), 6)]}))
+        return out
+
+
+@REGISTRY.register("biplanar-slide", Family.MOVE_OBJECT)
+class BiplanarSlide(_Swept):
+    """Rotate the object while it slides on two environment features at once."""
+
+    name = "biplanar-slide"
+
+    def families(self, ctx: PlanningContext, pose: Pose) -> list[Family_]:
+        world = ctx.world
+        pcs = _point_contacts(world, pose)
+        out: list[Family_] = []
+        for a in range(len(pcs)):
+            for b in range(a + 1, len(pcs)):
+                c1, c2 = pcs[a], pcs[b]
+                if c1.kind == c2.kind and c1.env == c2.env:
+                    continue  # same environment feature: a push or a tip, not two planes
+                t1, t2 = _line_direction(world, c1, pose), _line_direction(world, c2, pose)
+                if abs(t1[0] * t2[1] - t1[1] * t2[0]) < 1e-6:
+                    continue  # parallel lines: no rotation keeps both
+                for sense in (-1, 1):
+                    try:
+                        m = two_contact(world, pose, (c1, c2), sense)
+                    except ValueError:
+                        continue
+                    out.append((m, math.pi, {"contacts": [c1.name, c2.name], "sense": _sense_name(sense)}))
+        return out
+
+
+@REGISTRY.register("air-move", Family.MOVE_OBJECT)
+class AirMove:
+    """Free-space motion: from the start pose down to its contact pose T'_0, and from the
+    goal contact pose T'_g to the goal pose (paper, Step 1 and Sub-step 3)."""
+
+    name = "air-move"
+
+    def transitions(self, ctx: PlanningContext) -> set[tuple[ContactState, ContactState]]:
+        pairs: set[tuple[ContactState, ContactState]] = set()
+        if ctx.start_free:
+            pairs.add((FREE, ctx.start_contact.state))
+        if ctx.goal_free:
+            pairs.add((ctx.goal_contact.state, FREE))
+        return pairs
+
+    def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
+               start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment]:
+        if from_state.is_free:
+            target = ctx.start_contact.pose
+        elif to_state.is_free:
+            target = ctx.goal
+        else:
+            return
+        d = np.array([target.x - start_pose.x, target.y - start_pose.y])
+        dist = float(np.linalg.norm(d))
+        if abs(target.theta - start_pose.theta) > 1e-9 or dist < 1e-9:
+            if dist < 1e-9 and abs(target.theta - start_pose.theta) <= 1e-9:
+                return
+            log.debug("air-move needs a rotation; only translations are modelled")
+            return
+        m = translate(start_pose, d)
+        yield Segment(self.name, from_state, to_state, m, 0.0, dist, ctx.world,
+                      {"waypoints": [list(start_pose.to_degrees()), list(target.to_degrees())],
+                       "travel": round(dist, 6)})

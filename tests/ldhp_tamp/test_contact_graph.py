@@ -1,0 +1,147 @@
+"""Top tier Steps 1-3: contact poses, the contact-state graph, streams."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import ldhp_tamp.primitives.move_object  # noqa: F401  (registers the MoveObject primitives)
+from geometry.collision import object_env_overlap
+from geometry.contacts import contact_state
+from geometry.features import FREE, ContactState
+from geometry.poses import Pose
+from ldhp_tamp.contact_graph import admissible_transitions, build_context, contact_pose, relevant_states
+from ldhp_tamp.path import check_joined
+from ldhp_tamp.primitives import REGISTRY
+from ldhp_tamp.primitives.registry import Transition
+from ldhp_tamp.resources import scenarios_dir
+from ldhp_tamp.scenario import load_scenario
+from ldhp_tamp.streams import StreamStats, pose_paths
+from ldhp_tamp.symbolic import ContactGraph, build_problem, load_domain, parse_domain, solve
+
+S = ContactState.parse
+
+
+@pytest.fixture(scope="module")
+def domain():
+    return load_domain("ldhp")
+
+
+@pytest.fixture(scope="module")
+def task1():
+    sc = load_scenario(scenarios_dir() / "task1_zero_mobility_lift.toml")
+    return sc, build_context(sc.world, sc.start, sc.goal)
+
+
+@pytest.fixture(scope="module")
+def task2():
+    sc = load_scenario(scenarios_dir() / "task2_slot_insertion.toml")
+    return sc, build_context(sc.world, sc.start, sc.goal)
+
+
+def test_task1_has_the_papers_eight_states(task1) -> None:
+    _, ctx = task1
+    names = sorted(s.name for s in ctx.states if not s.is_free)
+    assert names == sorted([f"v{i}-e1" for i in range(1, 5)] + [f"l{i}-e1" for i in range(1, 5)])
+    assert FREE in ctx.states  # the goal is in the air
+
+
+def test_step1_contact_poses(task1, task2) -> None:
+    _, ctx = task1
+    assert not ctx.start_free and ctx.start_state == S("l1-e1")
+    # the goal (tipped 60 degrees, 100 mm up) comes down onto its corner v2
+    assert ctx.goal_free and ctx.goal_contact.state == S("v2-e1")
+    assert ctx.goal_contact.travel == pytest.approx(100.0, abs=1e-3)
+    assert ctx.goal_contact.direction == (0.0, -1.0)
+    _, ctx2 = task2
+    # held above the slot, the block comes down onto the slot floor on its 70 mm end
+    assert ctx2.start_free and ctx2.start_contact.state == S("l1-e1")
+    assert ctx2.start_contact.pose.y == pytest.approx(0.0, abs=1e-3)
+
+
+def test_contact_pose_refuses_an_object_with_nothing_around(task1) -> None:
+    sc, _ = task1
+    with pytest.raises(ValueError, match="touches nothing"):
+        contact_pose(sc.world, Pose(0.0, 2000.0, 0.0), reach=100.0)
+
+
+def test_task1_transitions(task1, domain) -> None:
+    _, ctx = task1
+    tr = admissible_transitions(ctx, domain.info, REGISTRY)
+    assert (S("l1-e1"), S("v2-e1")) in tr["tip"]
+    assert (S("v2-e1"), S("l2-e1")) in tr["tip"]
+    assert tr["air-move"] == frozenset({(S("v2-e1"), FREE)})
+    assert tr["biplanar-slide"] == frozenset()  # one environment edge: nothing to slide between
+    for pairs in tr.values():
+        for a, b in pairs:
+            assert a != b and a in ctx.state_set and b in ctx.state_set
+
+
+def test_vertex_on_vertex_states_are_dropped(task2) -> None:
+    sc, ctx = task2
+    env = sc.world.environment
+    for w in ctx.witnesses:
+        for p in w.witnesses:
+            v = sc.world.object_vertices(p)
+            assert np.min(np.linalg.norm(v[:, None] - env.vertices[None], axis=2)) > 0.1
+
+
+def test_relevant_states_prune_only_states_off_every_path(task2, domain) -> None:
+    _, ctx = task2
+    tr = admissible_transitions(ctx, domain.info, REGISTRY)
+    keep = relevant_states(ctx, tr)
+    assert ctx.start_state in keep and ctx.goal_state in keep
+    assert len(keep) < len(ctx.states)
+    full = ContactGraph(ctx.states, tr, ctx.start_state, ctx.goal_state, True, True)
+    pruned = ContactGraph(tuple(s for s in ctx.states if s in keep),
+                          {a: frozenset(p for p in v if p[0] in keep and p[1] in keep) for a, v in tr.items()},
+                          ctx.start_state, ctx.goal_state, True, True)
+    a = solve(build_problem(domain, full), "pyperplan")
+    b = solve(build_problem(domain, pruned), "pyperplan")
+    assert a.solved and b.solved and len(a.actions) == len(b.actions)
+
+
+def test_task1_streams_give_a_joined_path_to_the_goal(task1, domain) -> None:
+    sc, ctx = task1
+    plan = [Transition("tip", S("l1-e1"), S("v2-e1")), Transition("air-move", S("v2-e1"), FREE)]
+    stats = StreamStats()
+    paths = list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), stats))
+    assert paths
+    best = paths[0]
+    # ranked by the heuristic: the first path tips exactly to the goal's orientation
+    assert best.primitives == ("tip", "air-move")
+    assert best.segments[0].parameters["pivot"] == "v2"
+    assert best.segments[0].parameters["angle"] == pytest.approx(60.0, abs=1e-6)
+    for path in paths:
+        check_joined(path.segments)
+        assert np.allclose(path.segments[0].poses[0], [0.0, 0.0, 0.0])
+        end = path.segments[-1].end
+        assert end.distance(sc.goal)[0] < 1e-6 and end.distance(sc.goal)[1] < 1e-9
+        for seg in path.segments:
+            assert not object_env_overlap(sc.world, seg.poses).any()
+            verts = np.array([sc.world.object.polygon.transformed(*p) for p in seg.poses])
+            assert np.max(np.linalg.norm(np.diff(verts, axis=0), axis=2)) <= 4.0 + 1e-9
+            assert seg.step in (0, 1)
+
+
+def test_stream_dead_end_is_reported(task2, domain) -> None:
+    _, ctx = task2
+    # near the left wall, the block standing on the floor cannot tip left onto its side
+    plan = [Transition("air-move", FREE, S("l1-e1")), Transition("tip", S("l1-e1"), S("v1-e1")),
+            Transition("tip", S("v1-e1"), S("l4-e1"))]
+    stats = StreamStats()
+    assert list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), stats)) == []
+    assert stats.dead_ends[plan[2]] > 0
+
+
+def test_a_domain_without_tip_has_no_tip_transitions(task1, domain) -> None:
+    _, ctx = task1
+    text = domain.info.source
+    src = open(text).read() if not text.startswith("<") else text
+    start = src.index("(:action tip")
+    end = src.index("(:action", start + 5)
+    reduced = parse_domain(src[:start] + src[end:], "no-tip")
+    tr = admissible_transitions(ctx, reduced.info, REGISTRY)
+    assert "tip" not in tr and "push" in tr
