@@ -49,7 +49,32 @@ def cmd_check(args: argparse.Namespace) -> int:
     return status
 
 
-COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {"check": cmd_check}
+def cmd_validate(args: argparse.Namespace) -> int:
+    """Check a plan file against its scenario (the rules of ``ldhp-plan/1``)."""
+    from ldhp_tamp.plan import read_plan
+    from ldhp_tamp.scenario import load_scenario
+    from ldhp_tamp.validate import RULES, format_violation, validate_plan
+
+    plan = read_plan(args.plan)
+    scenario = load_scenario(args.scenario, check_planner=False)
+    report = validate_plan(plan, scenario)
+    for warning in report.warnings:
+        print(f"warning: {warning}")
+    for violation in report.violations:
+        print(format_violation(violation, plan))
+    checked = (f"{report.steps_checked} steps, {report.waypoints_checked} waypoints, "
+               f"{report.contacts_checked} finger contacts, {report.support_checks} support checks")
+    if report.valid:
+        print(f"valid: {args.plan} against {args.scenario} ({checked})")
+        return EXIT_OK
+    rules = ", ".join(f"{r} ({RULES[r]})" for r in sorted(report.rules_broken))
+    count = len(report.violations)
+    print(f"invalid: {args.plan} against {args.scenario}: {count} violation{'s' if count != 1 else ''} "
+          f"of rules {rules} ({checked})")
+    return EXIT_NO_PLAN
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {"check": cmd_check, "validate": cmd_validate}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -66,6 +91,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("check", help="load scenarios and print a short summary of each",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenarios", nargs="+", metavar="SCENARIO", help="scenario TOML files")
+
+    p = sub.add_parser("validate", help="check a plan against its scenario (the rules of ldhp-plan/1)",
+                       description="Check every rule of ldhp-plan/1 on every waypoint; print each "
+                                   "violation (rule, step, waypoint, what) and a one-line verdict.",
+                       epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("plan", metavar="PLAN", help="plan JSON file (ldhp-plan/1)")
+    p.add_argument("--scenario", required=True, metavar="SCENARIO", help="the scenario TOML file")
     return parser
 
 

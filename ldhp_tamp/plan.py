@@ -1,0 +1,525 @@
+"""Plans (``ldhp-plan/1``, see ``shared/spec/plan.md``): the model, reading and writing.
+
+The last stage of the pipeline: what the planner produces, what the validator checks and
+what other tools read. Inside the package poses are :class:`~geometry.poses.Pose` values
+(radians); the file holds degrees. Every number is written rounded to
+:data:`DECIMALS` decimals, in a stable key order, one waypoint per line.
+
+Reading is strict about what the spec requires (every key of a plan, a step and a
+waypoint; numbers finite; poses ``[x, y, theta]``) and names the file and the JSON path of
+the first problem (``plan.json: steps[2].waypoints[4].gripper: expected [x, y, theta]``).
+Keys the spec does not name are ignored, except in ``stats``, which keeps them.
+Writing is atomic: a temporary file in the target's folder, then :func:`os.replace`.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import logging
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping, NoReturn
+
+from geometry.poses import Pose
+from ldhp_tamp.errors import PlanFormatError
+from ldhp_tamp.primitives.registry import Family  # the one vocabulary of primitive families
+
+__all__ = [
+    "DECIMALS",
+    "PLAN_FORMAT",
+    "Family",
+    "Plan",
+    "PlanStats",
+    "PlanStatus",
+    "Point",
+    "Step",
+    "TIME_KEYS",
+    "Waypoint",
+    "plan_to_json",
+    "read_plan",
+    "read_plan_string",
+    "write_plan",
+]
+
+log = logging.getLogger(__name__)
+
+#: The format tag of plan files.
+PLAN_FORMAT = "ldhp-plan/1"
+
+#: Decimals kept when writing numbers (mm and degrees): 1 nm, well below any tolerance.
+DECIMALS = 6
+
+#: The keys of ``stats.time_s`` the spec names, in file order.
+TIME_KEYS: tuple[str, ...] = ("symbolic", "streams", "grasp_graph", "total")
+
+_COUNTER_KEYS: tuple[str, ...] = (
+    "contact_state_nodes", "grasp_graph_nodes", "grasp_graph_edges",
+    "top_iterations", "refinements", "feasibility_checks",
+)
+
+#: A world point (mm).
+Point = tuple[float, float]
+
+
+class PlanStatus(str, enum.Enum):
+    """Outcome of a solve: a failed solve is a plan with a status, not an exception."""
+
+    SOLVED = "solved"
+    FAILED = "failed"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """One instant of a plan.
+
+    Attributes
+    ----------
+    object : Pose
+        Object pose (world, radians).
+    gripper : Pose
+        Gripper frame pose (world, radians), see scenario.md "The gripper frame".
+    width : float
+        Spacing (two-point) or opening (polyline), mm.
+    finger_contacts : tuple
+        Per finger (finger 1, finger 2) the world point (mm) where it touches the
+        object, or ``None``.
+    """
+
+    object: Pose
+    gripper: Pose
+    width: float
+    finger_contacts: tuple[Point | None, Point | None] = (None, None)
+
+    def __post_init__(self) -> None:
+        if len(self.finger_contacts) != 2:
+            raise ValueError(f"finger_contacts needs two entries, got {len(self.finger_contacts)}")
+        pts = tuple(None if p is None else (float(p[0]), float(p[1])) for p in self.finger_contacts)
+        object.__setattr__(self, "finger_contacts", pts)
+        object.__setattr__(self, "width", float(self.width))
+
+
+@dataclass(frozen=True)
+class Step:
+    """One primitive instance: its name in the PDDL domain, family and waypoints.
+
+    ``parameters`` is free-form JSON (kept read-only); ``contact_state`` is the pair
+    ``(from, to)`` of contact-state names.
+    """
+
+    primitive: str
+    family: Family
+    parameters: Mapping[str, Any]
+    contact_state: tuple[str, str]
+    waypoints: tuple[Waypoint, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "family", Family(self.family))
+        object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
+        object.__setattr__(self, "contact_state", tuple(self.contact_state))
+        object.__setattr__(self, "waypoints", tuple(self.waypoints))
+        if len(self.contact_state) != 2:
+            raise ValueError("contact_state is a (from, to) pair")
+
+
+def _default_times() -> Mapping[str, float]:
+    return MappingProxyType({k: 0.0 for k in TIME_KEYS})
+
+
+@dataclass(frozen=True)
+class PlanStats:
+    """Search statistics. ``time_s`` holds at least :data:`TIME_KEYS`; keys of a file's
+    ``stats`` the spec does not name are kept in ``extra`` (and written back)."""
+
+    engine: str = ""
+    contact_state_nodes: int = 0
+    grasp_graph_nodes: int = 0
+    grasp_graph_edges: int = 0
+    top_iterations: int = 0
+    refinements: int = 0
+    feasibility_checks: int = 0
+    time_s: Mapping[str, float] = field(default_factory=_default_times)
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        times = {k: 0.0 for k in TIME_KEYS}
+        times.update({k: float(v) for k, v in self.time_s.items()})
+        object.__setattr__(self, "time_s", MappingProxyType(times))
+        object.__setattr__(self, "extra", MappingProxyType(dict(self.extra)))
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A plan file's content. ``reason`` says why a failed solve failed."""
+
+    format: str
+    scenario: str
+    scenario_sha256: str
+    status: PlanStatus
+    steps: tuple[Step, ...]
+    stats: PlanStats
+    reason: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", PlanStatus(self.status))
+        object.__setattr__(self, "steps", tuple(self.steps))
+
+    @property
+    def waypoints(self) -> tuple[Waypoint, ...]:
+        """All waypoints in order (the joins between steps appear twice)."""
+        return tuple(w for s in self.steps for w in s.waypoints)
+
+
+# --------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------
+
+
+class _Reader:
+    """Turns parsed JSON into a :class:`Plan`, naming the JSON path of any problem."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, where: str, problem: str) -> NoReturn:
+        raise PlanFormatError(f"{self.source}: {where}: {problem}" if where else f"{self.source}: {problem}")
+
+    def obj(self, value: Any, where: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            self.fail(where, f"expected an object, got {_kind(value)}")
+        return value
+
+    def key(self, d: dict[str, Any], key: str, where: str) -> Any:
+        if key not in d:
+            self.fail(where, f"missing key {key!r}")
+        return d[key]
+
+    def string(self, value: Any, where: str) -> str:
+        if not isinstance(value, str):
+            self.fail(where, f"expected a string, got {_kind(value)}")
+        return value
+
+    def number(self, value: Any, where: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(where, f"expected a number, got {_kind(value)}")
+        x = float(value)
+        if not math.isfinite(x):
+            self.fail(where, "expected a finite number")
+        return x
+
+    def integer(self, value: Any, where: str) -> int:
+        x = self.number(value, where)
+        if not x.is_integer() or x < 0:
+            self.fail(where, f"expected a non-negative integer, got {value!r}")
+        return int(x)
+
+    def numbers(self, value: Any, n: int, where: str, shape: str) -> list[float]:
+        if (not isinstance(value, list) or len(value) != n
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
+            self.fail(where, f"expected {shape}")
+        out = [float(v) for v in value]
+        if not all(math.isfinite(v) for v in out):
+            self.fail(where, f"expected {shape} of finite numbers")
+        return out
+
+    def pose(self, value: Any, where: str) -> Pose:
+        x, y, theta = self.numbers(value, 3, where, "[x, y, theta]")
+        return Pose.from_degrees(x, y, theta)
+
+    def waypoint(self, value: Any, where: str) -> Waypoint:
+        d = self.obj(value, where)
+        contacts = self.key(d, "finger_contacts", where)
+        cw = f"{where}.finger_contacts"
+        if not isinstance(contacts, list) or len(contacts) != 2:
+            self.fail(cw, "expected [finger 1, finger 2], each [x, y] or null")
+        pts = tuple(None if c is None else tuple(self.numbers(c, 2, f"{cw}[{k}]", "[x, y] or null"))
+                    for k, c in enumerate(contacts))
+        return Waypoint(
+            object=self.pose(self.key(d, "object", where), f"{where}.object"),
+            gripper=self.pose(self.key(d, "gripper", where), f"{where}.gripper"),
+            width=self.number(self.key(d, "width", where), f"{where}.width"),
+            finger_contacts=pts,  # type: ignore[arg-type]
+        )
+
+    def step(self, value: Any, where: str) -> Step:
+        d = self.obj(value, where)
+        primitive = self.string(self.key(d, "primitive", where), f"{where}.primitive")
+        family = self.string(self.key(d, "family", where), f"{where}.family")
+        if family not in {f.value for f in Family}:
+            self.fail(f"{where}.family", f"expected 'move-object' or 'adjust-grasp', got {family!r}")
+        parameters = self.obj(self.key(d, "parameters", where), f"{where}.parameters")
+        cs = self.obj(self.key(d, "contact_state", where), f"{where}.contact_state")
+        cs_from = self.string(self.key(cs, "from", f"{where}.contact_state"), f"{where}.contact_state.from")
+        cs_to = self.string(self.key(cs, "to", f"{where}.contact_state"), f"{where}.contact_state.to")
+        wps = self.key(d, "waypoints", where)
+        if not isinstance(wps, list):
+            self.fail(f"{where}.waypoints", f"expected a list, got {_kind(wps)}")
+        return Step(primitive, Family(family), parameters, (cs_from, cs_to),
+                    tuple(self.waypoint(w, f"{where}.waypoints[{i}]") for i, w in enumerate(wps)))
+
+    def stats(self, value: Any) -> PlanStats:
+        d = self.obj(value, "stats")
+        kwargs: dict[str, Any] = {}
+        if "engine" in d:
+            kwargs["engine"] = self.string(d["engine"], "stats.engine")
+        for k in _COUNTER_KEYS:
+            if k in d:
+                kwargs[k] = self.integer(d[k], f"stats.{k}")
+        if "time_s" in d:
+            t = self.obj(d["time_s"], "stats.time_s")
+            kwargs["time_s"] = {k: self.number(v, f"stats.time_s.{k}") for k, v in t.items()}
+        known = {"engine", "time_s", *_COUNTER_KEYS}
+        kwargs["extra"] = {k: v for k, v in d.items() if k not in known}
+        return PlanStats(**kwargs)
+
+    def plan(self, value: Any) -> Plan:
+        d = self.obj(value, "")
+        fmt = self.string(self.key(d, "format", ""), "format")
+        if fmt != PLAN_FORMAT:
+            self.fail("format", f"unknown format {fmt!r} (expected {PLAN_FORMAT!r})")
+        status = self.string(self.key(d, "status", ""), "status")
+        if status not in {s.value for s in PlanStatus}:
+            self.fail("status", f"expected 'solved' or 'failed', got {status!r}")
+        reason = d.get("reason")
+        if reason is not None:
+            reason = self.string(reason, "reason")
+        steps = self.key(d, "steps", "")
+        if not isinstance(steps, list):
+            self.fail("steps", f"expected a list, got {_kind(steps)}")
+        ignored = sorted(set(d) - {"format", "scenario", "scenario_sha256", "status", "reason", "steps", "stats"})
+        if ignored:
+            log.debug("%s: ignoring unknown keys %s", self.source, ", ".join(ignored))
+        return Plan(
+            format=fmt,
+            scenario=self.string(self.key(d, "scenario", ""), "scenario"),
+            scenario_sha256=self.string(self.key(d, "scenario_sha256", ""), "scenario_sha256"),
+            status=PlanStatus(status),
+            steps=tuple(self.step(s, f"steps[{i}]") for i, s in enumerate(steps)),
+            stats=self.stats(self.key(d, "stats", "")),
+            reason=reason,
+        )
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "null"
+    return {bool: "a boolean", int: "a number", float: "a number", str: "a string",
+            list: "a list", dict: "an object"}.get(type(value), type(value).__name__)
+
+
+def _no_constants(name: str) -> NoReturn:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def _finite_float(text: str) -> float:
+    x = float(text)
+    if not math.isfinite(x):
+        raise ValueError(f"number {text} is out of range")
+    return x
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    d: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in d:
+            raise ValueError(f"duplicate key {k!r}")
+        d[k] = v
+    return d
+
+
+def read_plan_string(text: str, source: str = "<string>") -> Plan:
+    """Parse the text of an ``ldhp-plan/1`` file.
+
+    Parameters
+    ----------
+    text : str
+        JSON text.
+    source : str
+        Name used in error messages (the file name).
+
+    Returns
+    -------
+    Plan
+
+    Raises
+    ------
+    PlanFormatError
+        Not JSON, or not ``ldhp-plan/1``; the message names ``source`` and the JSON path.
+
+    Examples
+    --------
+    >>> read_plan_string('{"format": "ldhp-plan/2"}', "p.json")
+    Traceback (most recent call last):
+    ...
+    ldhp_tamp.errors.PlanFormatError: p.json: format: unknown format 'ldhp-plan/2' (expected 'ldhp-plan/1')
+    """
+    try:
+        data = json.loads(text, parse_constant=_no_constants, parse_float=_finite_float,
+                          object_pairs_hook=_unique_keys)
+    except json.JSONDecodeError as exc:
+        raise PlanFormatError(f"{source}: not valid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
+    except (ValueError, RecursionError) as exc:
+        raise PlanFormatError(f"{source}: not valid JSON: {exc}") from None
+    return _Reader(source).plan(data)
+
+
+def read_plan(path: str | Path) -> Plan:
+    """Read an ``ldhp-plan/1`` file.
+
+    Raises
+    ------
+    PlanFormatError
+        The file cannot be read, is not UTF-8 JSON or is not ``ldhp-plan/1``; the message
+        names the file and the JSON path of the problem.
+    """
+    try:
+        text = Path(path).read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise PlanFormatError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise PlanFormatError(f"{path}: not UTF-8 text: {exc.reason} at byte {exc.start}") from None
+    return read_plan_string(text, str(path))
+
+
+# --------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------
+
+
+def _num(x: float) -> int | float:
+    """Round for the file: ``DECIMALS`` decimals, integral values as integers, no ``-0``."""
+    if isinstance(x, bool):
+        return x
+    r = round(float(x), DECIMALS)
+    if not math.isfinite(r):
+        raise ValueError(f"cannot write a non-finite number ({x}) to a plan")
+    if r.is_integer() and abs(r) < 2**53:
+        return int(r)
+    return r
+
+
+def _json_value(value: Any) -> Any:
+    """Free-form JSON with its numbers rounded as everywhere else."""
+    if isinstance(value, Mapping):
+        return {str(k): _json_value(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_value(v) for v in value]
+    if isinstance(value, enum.Enum):
+        return _json_value(value.value)
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return _num(value)
+    return value
+
+
+def _dump(value: Any) -> str:
+    return json.dumps(_json_value(value), ensure_ascii=False, allow_nan=False)
+
+
+def _pose(p: Pose) -> list[int | float]:
+    return [_num(v) for v in p.to_degrees()]
+
+
+def _waypoint_json(w: Waypoint) -> str:
+    contacts = [None if c is None else [_num(c[0]), _num(c[1])] for c in w.finger_contacts]
+    return json.dumps({"object": _pose(w.object), "gripper": _pose(w.gripper), "width": _num(w.width),
+                       "finger_contacts": contacts}, allow_nan=False)
+
+
+def _stats_json(s: PlanStats) -> dict[str, Any]:
+    d: dict[str, Any] = {"engine": s.engine}
+    d.update({k: getattr(s, k) for k in _COUNTER_KEYS})
+    d["time_s"] = dict(s.time_s)
+    d.update(s.extra)
+    return d
+
+
+def plan_to_json(plan: Plan) -> str:
+    """The text of a plan file: spec key order, degrees, one waypoint per line.
+
+    Numbers are rounded to :data:`DECIMALS` decimals (integral values written as
+    integers); the text ends with a newline.
+
+    Raises
+    ------
+    ValueError
+        A number is not finite (NaN has no JSON spelling).
+    """
+    lines = ["{"]
+    head = [("format", plan.format), ("scenario", plan.scenario),
+            ("scenario_sha256", plan.scenario_sha256), ("status", plan.status.value)]
+    if plan.reason is not None:
+        head.append(("reason", plan.reason))
+    lines += [f"  {_dump(k)}: {_dump(v)}," for k, v in head]
+    if not plan.steps:
+        lines.append('  "steps": [],')
+    else:
+        lines.append('  "steps": [')
+        for i, step in enumerate(plan.steps):
+            lines += [
+                "    {",
+                f'      "primitive": {_dump(step.primitive)},',
+                f'      "family": {_dump(step.family.value)},',
+                f'      "parameters": {_dump(step.parameters)},',
+                f'      "contact_state": {_dump({"from": step.contact_state[0], "to": step.contact_state[1]})},',
+            ]
+            if step.waypoints:
+                lines.append('      "waypoints": [')
+                last = len(step.waypoints) - 1
+                lines += [f"        {_waypoint_json(w)}{',' if j < last else ''}" for j, w in enumerate(step.waypoints)]
+                lines.append("      ]")
+            else:
+                lines.append('      "waypoints": []')
+            lines.append("    }" + ("," if i < len(plan.steps) - 1 else ""))
+        lines.append("  ],")
+    lines.append(f'  "stats": {_dump(_stats_json(plan.stats))}')
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+def write_plan(plan: Plan, path: str | Path) -> Path:
+    """Write a plan file atomically.
+
+    The text goes to a temporary file in the target's folder, is flushed to disk, then
+    :func:`os.replace` puts it in place: an interrupted run leaves the old file or the
+    new one, never part of one, and no temporary file.
+
+    Parameters
+    ----------
+    plan : Plan
+    path : str or Path
+        Target file; its folder must exist.
+
+    Returns
+    -------
+    Path
+        The path written.
+    """
+    target = Path(path)
+    text = plan_to_json(plan)  # before touching the disk: a bad value writes nothing
+    try:
+        mode = target.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        mode = 0o644
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, mode)
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    log.info("wrote %s (%d steps, %d waypoints)", target, len(plan.steps), sum(len(s.waypoints) for s in plan.steps))
+    return target

@@ -1,0 +1,685 @@
+"""The plan validator: the seven rules of ``ldhp-plan/1`` (``shared/spec/plan.md``).
+
+:func:`validate_plan` checks a :class:`~ldhp_tamp.plan.Plan` against a
+:class:`~ldhp_tamp.scenario.Scenario` from the two values alone (no planner internals),
+with the spec's tolerances (:data:`~geometry.tolerances.VALIDATE_TOL` for contact and
+position, :data:`~geometry.tolerances.VALIDATE_TOL_DEG` for angles). The choices the spec
+leaves open are listed in ``docs/design/validation.md``; in short:
+
+1. **Ends** also covers the file (``ldhp-plan/1``, status ``solved``, at least one step,
+   no empty step) and the joins between steps. Under ``goal_release`` a finger *touches*
+   the object if it declares a contact or lies within 1 mm of it.
+2. **Continuity** is checked over the whole waypoint sequence, so across step joins too.
+3. **No penetration** uses the overlap rule of :mod:`geometry.collision` per solid; a
+   finger and the palm are one rigid hand and are not tested against each other.
+4. **Real finger contacts**: distances to the object's boundary and the finger's boundary.
+5. **Move-object**: per finger, declared at every waypoint of the step or at none; at least
+   one finger declared (at every waypoint); each declared contact, in the object frame,
+   within 1 mm of where it was at the step's first waypoint.
+6. **Adjust-grasp**: the object pose within 1 mm and 1 degree of the step's first one.
+7. **Support**: every contact within 1 mm (and every declared finger contact) with its
+   full Coulomb cone, tested by :func:`geometry.mechanics.feasible_batch` at margin 0.
+
+A run of consecutive waypoints of one step that break the same check the same way is one
+:class:`Violation` (``waypoint`` .. ``last_waypoint``, the message quoting the worst one),
+so a systematic fault is one line, not a thousand. Indices are 0-based, as JSON paths.
+A plan made for another scenario file (``scenario_sha256`` differs) gets a warning, not a
+violation: the rules are about geometry, and the geometry is checked.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Callable, Iterator
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+
+from geometry import collision, mechanics
+from geometry.poses import transform_points, wrap_angle
+from geometry.shapes import FloatArray
+from geometry.tolerances import MAX_WAYPOINT_STEP, VALIDATE_TOL, VALIDATE_TOL_DEG
+from geometry.world import Environment, PolylineGripper, TwoPointGripper, World
+from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStatus
+from ldhp_tamp.scenario import Scenario
+
+__all__ = ["RULES", "ValidationReport", "Violation", "format_violation", "validate_plan"]
+
+log = logging.getLogger(__name__)
+
+BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
+
+#: Short names of the spec's rules, by number.
+RULES: dict[int, str] = {
+    1: "ends",
+    2: "continuity",
+    3: "no penetration",
+    4: "real finger contacts",
+    5: "move-object keeps the grasp",
+    6: "adjust-grasp keeps the object still",
+    7: "quasi-static support",
+}
+
+#: Slack (mm, or radians) for numbers that went through a file rounded to 6 decimals
+#: (positions move by up to ~1e-6 mm, vertices of a turned body a few times that): "at most
+#: 5 mm" accepts 5.00001 mm. Far below every tolerance of the spec.
+ROUNDING_SLACK = 1e-5
+
+_TOL = VALIDATE_TOL + ROUNDING_SLACK
+_TOL_RAD = math.radians(VALIDATE_TOL_DEG) + ROUNDING_SLACK
+_STEP = MAX_WAYPOINT_STEP + ROUNDING_SLACK
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One broken rule.
+
+    Attributes
+    ----------
+    rule : int
+        The spec's rule number, 1..7.
+    step : int or None
+        0-based step index (``steps[i]`` in the file); ``None`` for the plan as a whole.
+    waypoint : int or None
+        0-based waypoint index within the step (the first of a run).
+    message : str
+        What is wrong, with the numbers.
+    last_waypoint : int or None
+        Last waypoint (inclusive) of a run of consecutive waypoints that break the rule
+        the same way; ``None`` for a single waypoint.
+    """
+
+    rule: int
+    step: int | None
+    waypoint: int | None
+    message: str
+    last_waypoint: int | None = None
+
+    def sort_key(self) -> tuple[int, int, int]:
+        return (-1 if self.step is None else self.step, -1 if self.waypoint is None else self.waypoint, self.rule)
+
+
+@dataclass(frozen=True)
+class ValidationReport:
+    """The verdict on a plan: valid iff no violation. Warnings do not count.
+
+    The counts say what was checked: steps and waypoints, declared finger contacts
+    (rule 4) and quasi-static support tests (rule 7).
+    """
+
+    valid: bool
+    violations: tuple[Violation, ...]
+    warnings: tuple[str, ...] = ()
+    steps_checked: int = 0
+    waypoints_checked: int = 0
+    contacts_checked: int = 0
+    support_checks: int = 0
+
+    def __post_init__(self) -> None:
+        if self.valid != (not self.violations):
+            raise ValueError("a report is valid exactly when it has no violation")
+
+    @property
+    def rules_broken(self) -> frozenset[int]:
+        """The numbers of the rules with at least one violation."""
+        return frozenset(v.rule for v in self.violations)
+
+
+def format_violation(v: Violation, plan: Plan) -> str:
+    """One line: ``rule 5 (move-object keeps the grasp), step 2 (air-move), waypoints 3-20: ...``."""
+    where = [f"rule {v.rule} ({RULES.get(v.rule, '?')})"]
+    if v.step is not None:
+        prim = plan.steps[v.step].primitive if 0 <= v.step < len(plan.steps) else "?"
+        where.append(f"step {v.step} ({prim})")
+    if v.waypoint is not None:
+        where.append(f"waypoint {v.waypoint}" if v.last_waypoint is None
+                     else f"waypoints {v.waypoint}-{v.last_waypoint}")
+    return ", ".join(where) + ": " + v.message
+
+
+# --------------------------------------------------------------------------------------
+# The plan as arrays
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _Flat:
+    """All waypoints of the non-empty steps, in order, as arrays (radians, mm)."""
+
+    obj: FloatArray  # (W, 3)
+    grip: FloatArray  # (W, 3)
+    width: FloatArray  # (W,)
+    contacts: FloatArray  # (W, 2, 2), NaN where not declared
+    declared: BoolArray  # (W, 2)
+    step: IntArray  # (W,) step index
+    local: IntArray  # (W,) waypoint index within its step
+
+    @classmethod
+    def of(cls, plan: Plan) -> "_Flat":
+        rows = [(i, j, w) for i, s in enumerate(plan.steps) for j, w in enumerate(s.waypoints)]
+        n = len(rows)
+        obj = np.array([w.object.as_array() for _, _, w in rows], dtype=float).reshape(n, 3)
+        grip = np.array([w.gripper.as_array() for _, _, w in rows], dtype=float).reshape(n, 3)
+        contacts = np.array([[c if c is not None else (np.nan, np.nan) for c in w.finger_contacts]
+                             for _, _, w in rows], dtype=float).reshape(n, 2, 2)
+        return cls(
+            obj=obj, grip=grip,
+            width=np.array([w.width for _, _, w in rows], dtype=float),
+            contacts=contacts,
+            declared=~np.isnan(contacts[..., 0]),
+            step=np.array([i for i, _, _ in rows], dtype=np.int64),
+            local=np.array([j for _, j, _ in rows], dtype=np.int64),
+        )
+
+    def __len__(self) -> int:
+        return int(self.step.shape[0])
+
+    def take(self, rows: slice) -> "_Flat":
+        """The waypoints ``rows`` as a smaller :class:`_Flat`."""
+        return _Flat(self.obj[rows], self.grip[rows], self.width[rows], self.contacts[rows],
+                     self.declared[rows], self.step[rows], self.local[rows])
+
+    def step_slice(self, i: int) -> slice:
+        idx = np.flatnonzero(self.step == i)
+        return slice(int(idx[0]), int(idx[-1]) + 1) if idx.size else slice(0, 0)
+
+
+def _runs(bad: BoolArray, step: IntArray) -> Iterator[tuple[int, int]]:
+    """(first, last) global indices of maximal runs of ``bad`` within one step."""
+    idx = np.flatnonzero(bad)
+    if idx.size == 0:
+        return
+    breaks = np.flatnonzero((np.diff(idx) != 1) | (np.diff(step[idx]) != 0))
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [idx.size - 1]])
+    for a, b in zip(starts, ends):
+        yield int(idx[a]), int(idx[b])
+
+
+class _Findings:
+    """Collects violations; groups runs of bad waypoints into one violation each."""
+
+    def __init__(self, flat: _Flat):
+        self.flat = flat
+        self.violations: list[Violation] = []
+
+    def add(self, rule: int, step: int | None, waypoint: int | None, message: str) -> None:
+        self.violations.append(Violation(rule, step, waypoint, message))
+
+    def flag(self, rule: int, bad: BoolArray, describe: Callable[[int], str],
+             severity: FloatArray | None = None) -> None:
+        """One violation per run of ``bad`` waypoints; ``describe(i)`` words waypoint ``i``
+        (the run's worst by ``severity``, else its first)."""
+        f = self.flat
+        for i0, i1 in _runs(bad, f.step):
+            worst = i0 if severity is None else i0 + int(np.argmax(severity[i0:i1 + 1]))
+            msg = describe(worst)
+            if i1 > i0 and worst != i0:
+                msg += f" (worst at waypoint {f.local[worst]})"
+            self.violations.append(Violation(rule, int(f.step[i0]), int(f.local[i0]), msg,
+                                             int(f.local[i1]) if i1 > i0 else None))
+
+
+def _mm(x: float) -> str:
+    return f"{x:.2f} mm"
+
+
+def _pt(p: FloatArray) -> str:
+    return f"({p[0]:.2f}, {p[1]:.2f})"
+
+
+def _pose_gap(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Position distance (mm) and absolute wrapped angle difference (rad) of pose rows."""
+    a2, b2 = np.atleast_2d(a), np.atleast_2d(b)
+    return (np.hypot(a2[:, 0] - b2[:, 0], a2[:, 1] - b2[:, 1]),
+            np.abs(np.asarray(wrap_angle(a2[:, 2] - b2[:, 2]))))
+
+
+def _pose_differs(a: FloatArray, b: FloatArray) -> str | None:
+    """``None`` when the poses agree within the tolerances, else the gap in words."""
+    d, t = (float(x[0]) for x in _pose_gap(a, b))
+    if d <= _TOL and t <= _TOL_RAD:
+        return None
+    return f"{_mm(d)} and {math.degrees(t):.2f} deg apart"
+
+
+def _fmt_pose(p: FloatArray) -> str:
+    return f"[{p[0]:.2f}, {p[1]:.2f}, {math.degrees(p[2]):.2f}]"
+
+
+# --------------------------------------------------------------------------------------
+# Geometry helpers
+# --------------------------------------------------------------------------------------
+
+
+def _segment_distance(points: FloatArray, segments: FloatArray) -> FloatArray:
+    """(..., S) distance from points (..., 2) to closed segments (S, 2, 2)."""
+    a = segments[:, 0]
+    d = segments[:, 1] - a
+    rel = points[..., None, :] - a  # (..., S, 2)
+    t = np.clip(np.einsum("...sk,sk->...s", rel, d) / np.einsum("sk,sk->s", d, d), 0.0, 1.0)
+    return np.linalg.norm(rel - t[..., None] * d, axis=-1)
+
+
+def _to_frame(poses: FloatArray, points: FloatArray) -> FloatArray:
+    """World points (B, ..., 2) into the frames of poses (B, 3)."""
+    shape = (-1,) + (1,) * (points.ndim - 2)
+    c = np.cos(poses[:, 2]).reshape(shape)
+    s = np.sin(poses[:, 2]).reshape(shape)
+    dx = points[..., 0] - poses[:, 0].reshape(shape)
+    dy = points[..., 1] - poses[:, 1].reshape(shape)
+    return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+
+
+def _rotate(poses: FloatArray, vectors: FloatArray) -> FloatArray:
+    """Body directions (..., 2) (broadcast against B) into the world, for poses (B, 3)."""
+    v = np.asarray(vectors, dtype=float)
+    shape = (-1,) + (1,) * (v.ndim - 2)
+    c = np.cos(poses[:, 2]).reshape(shape)
+    s = np.sin(poses[:, 2]).reshape(shape)
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def _finger_offsets(width: FloatArray) -> FloatArray:
+    """(B, 2, 2): the shift of finger 1 and finger 2 in the gripper frame."""
+    z = np.zeros_like(width)
+    return np.stack([np.stack([-width / 2, z], -1), np.stack([width / 2, z], -1)], axis=1)
+
+
+@dataclass(frozen=True, eq=False)
+class _FingerBoundary:
+    """Where a point is relative to each finger's boundary, batched over waypoints."""
+
+    distance: FloatArray  # (B, 2) distance to finger k's boundary
+    normals: FloatArray  # (B, 2, E, 2) outward boundary normals (world) near the point
+    near: BoolArray  # (B, 2, E) which of those normals apply (within tolerance)
+
+
+def _finger_boundary(world: World, grip: FloatArray, width: FloatArray, points: FloatArray) -> _FingerBoundary:
+    """Distance from ``points`` (B, 2 fingers, 2) to each finger's boundary, and the
+    finger's outward normals there (two-point: the radial direction; polyline: every
+    finger edge within tolerance of the point)."""
+    g = world.gripper
+    off = _finger_offsets(width)
+    local = _to_frame(grip, points) - off  # in each finger's own frame (B, 2, 2)
+    if isinstance(g, TwoPointGripper):
+        rho = np.linalg.norm(local, axis=-1)
+        radial = local / np.where(rho > 0, rho, 1.0)[..., None]
+        return _FingerBoundary(np.abs(rho - g.finger_radius), _rotate(grip, radial)[:, :, None, :],
+                               (rho > 0)[..., None])
+    assert isinstance(g, PolylineGripper)
+    dist = np.empty(points.shape[:2])
+    normals, near = [], []
+    for k, poly in enumerate((g.mirrored_finger, g.finger)):
+        d = _segment_distance(local[:, k], poly.edges)  # (B, E)
+        dist[:, k] = d.min(axis=1)
+        normals.append(_rotate(grip, np.broadcast_to(poly.normals, (grip.shape[0],) + poly.normals.shape)))
+        near.append(d <= _TOL)
+    return _FingerBoundary(dist, np.stack(normals, axis=1), np.stack(near, axis=1))
+
+
+def _solid_label(env: Environment, k: int) -> str:
+    name = env.solids[k].name
+    return f"solid {name!r}" if name else f"solid {k + 1}"
+
+
+# --------------------------------------------------------------------------------------
+# Rule 7: quasi-static support
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _Contacts:
+    """The contacts present at each waypoint, as candidate normals (force directions on
+    the object) at points, each with a friction coefficient; ``on`` marks those present."""
+
+    points: FloatArray  # (B, C, 2)
+    normals: FloatArray  # (B, C, 2) unit, pointing into the object
+    mu: FloatArray  # (B, C)
+    on: BoolArray  # (B, C)
+    labels: tuple[str, ...]  # (C,) the contact each candidate belongs to
+
+
+def _contacts(world: World, flat: _Flat) -> _Contacts:
+    """Every contact of rule 7 at every waypoint, with its candidate normals.
+
+    - object vertex ``v_i`` within tolerance of environment edge ``e_j``: at the vertex,
+      normal ``e_j``'s outward normal;
+    - environment vertex ``ve_j`` within tolerance of object edge ``l_i``: at the vertex,
+      normal ``l_i``'s inward normal;
+    - declared finger contact: near an object vertex (within tolerance), the finger's
+      outward boundary normal there (two-point: radial; polyline: each finger edge within
+      tolerance); otherwise the inward normal of each object edge within tolerance. A
+      contact rule 4 rejects (no feature within tolerance) takes the nearest object edge's.
+    """
+    obj, env, fr = world.object, world.environment, world.friction
+    poly = obj.polygon
+    n, m, b = len(poly), env.m, len(flat)
+    pts, nrm, mus, ons, labels = [], [], [], [], []
+
+    def add(p: FloatArray, nv: FloatArray, mu: FloatArray, on: BoolArray, names: list[str]) -> None:
+        c = on.shape[1]
+        pts.append(np.broadcast_to(p, (b, c, 2)))
+        nrm.append(np.broadcast_to(nv, (b, c, 2)))
+        mus.append(np.broadcast_to(mu, (b, c)))
+        ons.append(on)
+        labels.extend(names)
+
+    # Object vertices on environment edges.
+    verts = transform_points(flat.obj, poly.vertices)  # (B, N, 2)
+    d_ve = _segment_distance(verts, env.edges)  # (B, N, M)
+    mu_ve = np.array([[fr.environment_mu("v", i, "e", j, n_object=n) for j in range(m)] for i in range(n)])
+    add(np.repeat(verts, m, axis=1), np.tile(env.normals, (n, 1)), mu_ve.reshape(-1),
+        (d_ve <= _TOL).reshape(b, n * m), [f"v{i + 1}-e{j + 1}" for i in range(n) for j in range(m)])
+
+    # Environment vertices on object edges.
+    ev_local = _to_frame(flat.obj, np.broadcast_to(env.vertices, (b, m, 2)))  # (B, M, 2)
+    d_ev = _segment_distance(ev_local, poly.edges)  # (B, M, N)
+    inward = _rotate(flat.obj, np.broadcast_to(-poly.normals, (b, n, 2)))  # (B, N, 2)
+    mu_ev = np.array([[fr.environment_mu("l", i, "ve", j, world_edges=env.vertex_edges, n_object=n)
+                       for i in range(n)] for j in range(m)])
+    add(np.repeat(env.vertices, n, axis=0), np.tile(inward, (1, m, 1)), mu_ev.reshape(-1),
+        (d_ev <= _TOL).reshape(b, m * n), [f"l{i + 1}-ve{j + 1}" for j in range(m) for i in range(n)])
+
+    # Declared finger contacts.
+    if flat.declared.any():
+        p = np.nan_to_num(flat.contacts)  # (B, 2, 2)
+        q = _to_frame(flat.obj, p)  # object frame
+        d_edge = _segment_distance(q, poly.edges)  # (B, 2, N)
+        d_vert = np.linalg.norm(q[:, :, None, :] - poly.vertices, axis=-1)  # (B, 2, N)
+        at_vertex = (d_vert <= _TOL).any(axis=-1)  # (B, 2)
+        nearest_vertex = np.argmin(d_vert, axis=-1)
+        fb = _finger_boundary(world, flat.grip, flat.width, p)
+        mu_l = np.array([fr.gripper_mu("l", i, n) for i in range(n)])
+        mu_v = np.array([fr.gripper_mu("v", i, n) for i in range(n)])
+        nearest_edge = np.argmin(d_edge, axis=-1)
+        for k in range(2):
+            dec = flat.declared[:, k]
+            on_edge = (d_edge[:, k] <= _TOL) & (dec & ~at_vertex[:, k])[:, None]  # (B, N)
+            on_finger = fb.near[:, k] & (dec & at_vertex[:, k])[:, None]  # (B, E)
+            fallback = dec & ~on_edge.any(axis=1) & ~on_finger.any(axis=1)
+            on_edge |= fallback[:, None] & (np.arange(n) == nearest_edge[:, k][:, None])
+            label = f"finger {k + 1}"
+            add(p[:, k, None, :], inward, mu_l, on_edge, [label] * n)
+            e = on_finger.shape[1]
+            add(p[:, k, None, :], fb.normals[:, k], mu_v[nearest_vertex[:, k]][:, None] * np.ones(e),
+                on_finger, [label] * e)
+
+    return _Contacts(np.concatenate(pts, 1), np.concatenate(nrm, 1), np.concatenate(mus, 1),
+                     np.concatenate(ons, 1), tuple(labels))
+
+
+#: Waypoints per block of rule 7 (bounds the memory for large environments).
+_BLOCK = 1024
+
+
+def _support(world: World, flat: _Flat) -> BoolArray:
+    """Rule 7 at every waypoint: whether the contacts present can carry the weight.
+
+    Every contact candidate is a STICKING contact (full cone) of
+    :func:`geometry.mechanics.feasible_batch` with margin 0: closed cone membership, so
+    contacts that must carry no force do not spoil an equilibrium.
+    """
+    ok = np.zeros(len(flat), dtype=bool)
+    com = transform_points(flat.obj, world.object.com)[:, 0]  # (B, 2)
+    scale = world.object.length_scale
+    for start in range(0, len(flat), _BLOCK):
+        block = slice(start, min(start + _BLOCK, len(flat)))
+        c = _contacts(world, flat.take(block))
+        count = c.on.sum(axis=1)
+        for kc in np.unique(count[count > 0]):
+            rows = np.flatnonzero(count == kc)
+            cols = np.argsort(~c.on[rows], axis=1, kind="stable")[:, :kc]  # the candidates present
+            contacts = mechanics.Contacts.make(
+                np.take_along_axis(c.points[rows], cols[..., None], axis=1),
+                np.take_along_axis(c.normals[rows], cols[..., None], axis=1),
+                np.take_along_axis(c.mu[rows], cols, axis=1),
+            )
+            ok[start + rows] = mechanics.feasible_batch(contacts, com[block][rows], scale, margin=0.0)
+    return ok
+
+
+# --------------------------------------------------------------------------------------
+# The rules
+# --------------------------------------------------------------------------------------
+
+
+def _rule1(plan: Plan, scenario: Scenario, flat: _Flat, out: _Findings) -> None:
+    first, last = 0, len(flat) - 1
+    gap = _pose_differs(flat.obj[first], scenario.start.as_array())
+    if gap:
+        out.add(1, int(flat.step[first]), 0, f"first object pose {_fmt_pose(flat.obj[first])} is not the "
+                f"scenario's start {_fmt_pose(scenario.start.as_array())} ({gap})")
+    gap = _pose_differs(flat.obj[last], scenario.goal.as_array())
+    if gap:
+        out.add(1, int(flat.step[last]), int(flat.local[last]), f"last object pose {_fmt_pose(flat.obj[last])} "
+                f"is not the scenario's goal {_fmt_pose(scenario.goal.as_array())} ({gap})")
+    g = scenario.start_grasp
+    if g is not None:
+        gap = _pose_differs(flat.grip[first], g.pose.as_array())
+        if gap:
+            out.add(1, int(flat.step[first]), 0, f"first gripper pose {_fmt_pose(flat.grip[first])} is not the "
+                    f"scenario's start_grasp {_fmt_pose(g.pose.as_array())} ({gap})")
+        if abs(flat.width[first] - g.width) > _TOL:
+            out.add(1, int(flat.step[first]), 0, f"first width {flat.width[first]:.2f} mm is not the "
+                    f"start_grasp width {g.width:.2f} mm")
+    if scenario.goal_release:
+        for k in np.flatnonzero(_touching(scenario.world, flat, last)):
+            out.add(1, int(flat.step[last]), int(flat.local[last]),
+                    f"goal_release: finger {k + 1} still touches the object at the last waypoint")
+    # Joins: a step's first waypoint equals the previous (non-empty) step's last one.
+    starts = np.flatnonzero(np.diff(flat.step) != 0) + 1
+    for i in starts:
+        problems = []
+        for what, a in (("object pose", flat.obj), ("gripper pose", flat.grip)):
+            gap = _pose_differs(a[i], a[i - 1])
+            if gap:
+                problems.append(f"{what} {gap}")
+        if abs(flat.width[i] - flat.width[i - 1]) > _TOL:
+            problems.append(f"width {flat.width[i - 1]:.2f} -> {flat.width[i]:.2f} mm")
+        for k in range(2):
+            da, db = flat.declared[i - 1, k], flat.declared[i, k]
+            if da != db:
+                problems.append(f"finger {k + 1} contact {'declared' if db else 'not declared'} here, "
+                                f"{'declared' if da else 'not declared'} there")
+            elif da and np.linalg.norm(flat.contacts[i, k] - flat.contacts[i - 1, k]) > _TOL:
+                problems.append(f"finger {k + 1} contact {_pt(flat.contacts[i - 1, k])} -> {_pt(flat.contacts[i, k])}")
+        if problems:
+            prev = int(flat.step[i - 1])
+            out.add(1, int(flat.step[i]), 0, f"does not join step {prev}'s last waypoint: " + "; ".join(problems))
+
+
+def _touching(world: World, flat: _Flat, i: int) -> BoolArray:
+    """(2,) whether each finger touches the object at waypoint ``i``: a declared contact,
+    or the finger within tolerance of the object."""
+    obj = shapely.Polygon(transform_points(flat.obj[i:i + 1], world.object.polygon.vertices)[0])
+    fs = collision.finger_shapes(world.gripper, flat.grip[i:i + 1], flat.width[i:i + 1])
+    if fs.centres is not None:
+        gaps = shapely.distance(shapely.points(fs.centres[0]), obj) - float(fs.radius)
+    else:
+        assert fs.polygons is not None
+        gaps = shapely.distance(shapely.polygons(fs.polygons[0]), obj)
+    return flat.declared[i] | (np.asarray(gaps) <= _TOL)
+
+
+def _rule2(world: World, flat: _Flat, out: _Findings) -> None:
+    def moves(points: FloatArray) -> FloatArray:
+        d = np.zeros(points.shape[0])
+        if points.shape[0] > 1:
+            d[1:] = np.linalg.norm(np.diff(points, axis=0), axis=-1).reshape(points.shape[0] - 1, -1).max(axis=1)
+        return d
+
+    obj_move = moves(transform_points(flat.obj, world.object.polygon.vertices))
+    fs = collision.finger_shapes(world.gripper, flat.grip, flat.width)
+    finger_move = moves(fs.centres if fs.centres is not None else fs.polygons)
+    width_move = np.concatenate([[0.0], np.abs(np.diff(flat.width))])
+    what = "finger centre" if fs.centres is not None else "finger vertex"
+    for name, d in (("object vertex", obj_move), (what, finger_move), ("width", width_move)):
+        verb = "changes" if name == "width" else "moves"
+        out.flag(2, d > _STEP, lambda i, d=d, name=name, verb=verb:
+                 f"{name} {verb} {_mm(d[i])} since the previous waypoint (limit {_mm(MAX_WAYPOINT_STEP)})", d)
+
+
+def _rule3(world: World, flat: _Flat, out: _Findings) -> None:
+    tol = VALIDATE_TOL
+    env = world.environment
+    has_palm = isinstance(world.gripper, PolylineGripper) and world.gripper.palm is not None
+    for k, solid in enumerate(env.solids):
+        one = World(world.object, Environment((solid,)), world.gripper, world.friction)
+        label = _solid_label(env, k)
+        out.flag(3, collision.object_env_overlap(one, flat.obj, tol), lambda i, s=label: f"the object penetrates {s}")
+        fingers = collision.finger_env_overlap(one, flat.grip, flat.width, tol)
+        for f in range(2):
+            out.flag(3, fingers[:, f], lambda i, s=label, f=f: f"finger {f + 1} penetrates {s}")
+        if has_palm:
+            out.flag(3, collision.palm_env_overlap(one, flat.grip, tol), lambda i, s=label: f"the palm penetrates {s}")
+    fingers = collision.finger_object_overlap(world, flat.obj, flat.grip, flat.width, tol)
+    for f in range(2):
+        out.flag(3, fingers[:, f], lambda i, f=f: f"finger {f + 1} penetrates the object")
+    if has_palm:
+        out.flag(3, collision.palm_object_overlap(world, flat.obj, flat.grip, tol), lambda i: "the palm penetrates the object")
+    out.flag(3, collision.fingers_overlap(world.gripper, flat.width, tol), lambda i: "the fingers penetrate each other")
+
+
+def _rule4(world: World, flat: _Flat, out: _Findings) -> None:
+    if not flat.declared.any():
+        return
+    p = np.nan_to_num(flat.contacts)
+    d_obj = _segment_distance(_to_frame(flat.obj, p), world.object.polygon.edges).min(axis=-1)  # (B, 2)
+    d_fin = _finger_boundary(world, flat.grip, flat.width, p).distance
+    for k in range(2):
+        worst = np.maximum(d_obj[:, k], d_fin[:, k])
+        bad = flat.declared[:, k] & (worst > _TOL)
+        out.flag(4, bad, lambda i, k=k: f"finger {k + 1} contact {_pt(flat.contacts[i, k])} is "
+                 f"{_mm(d_obj[i, k])} from the object's boundary and {_mm(d_fin[i, k])} from the finger's "
+                 f"(tolerance {_mm(VALIDATE_TOL)})", worst)
+
+
+def _rule5(plan: Plan, flat: _Flat, out: _Findings) -> None:
+    for s, step in enumerate(plan.steps):
+        sl = flat.step_slice(s)
+        if step.family is not Family.MOVE_OBJECT or sl.stop == sl.start:
+            continue
+        bad = np.zeros(len(flat), dtype=bool)
+        dec = flat.declared[sl]
+        bad[sl] = ~dec.any(axis=1)
+        out.flag(5, bad, lambda i: "no finger touches the object (no declared finger contact)")
+        q = _to_frame(flat.obj[sl], np.nan_to_num(flat.contacts[sl]))  # (n, 2, 2) object frame
+        for k in range(2):
+            bad[:] = False
+            bad[sl] = dec[:, k] != dec[0, k]
+            first = "declared" if dec[0, k] else "not declared"
+            out.flag(5, bad, lambda i, k=k, first=first: f"finger {k + 1} contact is {first} at the step's first "
+                     f"waypoint but {'not ' if first == 'declared' else ''}declared here")
+            if not dec[:, k].any():
+                continue
+            ref = int(np.argmax(dec[:, k]))
+            drift = np.zeros(len(flat))
+            drift[sl] = np.where(dec[:, k], np.linalg.norm(q[:, k] - q[ref, k], axis=-1), 0.0)
+            out.flag(5, drift > _TOL, lambda i, k=k, ref=ref: f"finger {k + 1} contact moves {_mm(drift[i])} in "
+                     f"the object frame since waypoint {ref} (tolerance {_mm(VALIDATE_TOL)})", drift)
+
+
+def _rule6(plan: Plan, flat: _Flat, out: _Findings) -> None:
+    for s, step in enumerate(plan.steps):
+        sl = flat.step_slice(s)
+        if step.family is not Family.ADJUST_GRASP or sl.stop == sl.start:
+            continue
+        d, t = _pose_gap(flat.obj[sl], flat.obj[sl.start])
+        bad = np.zeros(len(flat), dtype=bool)
+        bad[sl] = (d > _TOL) | (t > _TOL_RAD)
+        severity = np.zeros(len(flat))
+        severity[sl] = np.maximum(d / VALIDATE_TOL, t / math.radians(VALIDATE_TOL_DEG))
+        dd, tt = np.zeros(len(flat)), np.zeros(len(flat))
+        dd[sl], tt[sl] = d, t
+        out.flag(6, bad, lambda i: f"the object moves {_mm(dd[i])} and {math.degrees(tt[i]):.2f} deg since the "
+                 f"step's first waypoint (tolerance {_mm(VALIDATE_TOL)}, {VALIDATE_TOL_DEG:g} deg)", severity)
+
+
+def _rule7(world: World, flat: _Flat, out: _Findings) -> None:
+    def describe(i: int) -> str:
+        c = _contacts(world, flat.take(slice(i, i + 1)))
+        names = sorted({c.labels[j] for j in np.flatnonzero(c.on[0])}, key=lambda s: (s.startswith("finger"), s))
+        present = f"contacts present: {', '.join(names)}" if names else "the object touches nothing"
+        return f"no contact forces in the friction cones balance the weight ({present})"
+
+    out.flag(7, ~_support(world, flat), describe)
+
+
+# --------------------------------------------------------------------------------------
+# Entry point
+# --------------------------------------------------------------------------------------
+
+
+def _warnings(plan: Plan, scenario: Scenario, flat: _Flat) -> list[str]:
+    warn = []
+    where = scenario.path if scenario.path is not None else scenario.name
+    if plan.scenario_sha256 != scenario.sha256:
+        warn.append(f"the plan was made for a scenario with sha256 {plan.scenario_sha256[:12]}..., "
+                    f"not {where} (sha256 {scenario.sha256[:12]}...): checking against {where} anyway")
+    if plan.scenario != scenario.name:
+        warn.append(f"the plan names scenario {plan.scenario!r}, the scenario file is {scenario.name!r}")
+    lo, hi = scenario.world.gripper.width_range
+    outside = (flat.width < lo - _TOL) | (flat.width > hi + _TOL)
+    if outside.any():
+        i = int(np.argmax(outside))
+        warn.append(f"width outside the gripper's range [{lo:g}, {hi:g}] mm at {int(outside.sum())} waypoints "
+                    f"(first: step {flat.step[i]} waypoint {flat.local[i]}, {flat.width[i]:.2f} mm); "
+                    "no rule of the spec covers it")
+    return warn
+
+
+def validate_plan(plan: Plan, scenario: Scenario) -> ValidationReport:
+    """Check a plan against its scenario: the seven rules of ``ldhp-plan/1``.
+
+    Parameters
+    ----------
+    plan : Plan
+    scenario : Scenario
+
+    Returns
+    -------
+    ValidationReport
+        ``valid`` iff no rule is broken; every violation found (all rules are checked,
+        not only up to the first failure), sorted by step, waypoint and rule.
+    """
+    world = scenario.world
+    flat = _Flat.of(plan)
+    out = _Findings(flat)
+    if plan.format != PLAN_FORMAT:
+        out.add(1, None, None, f"format is {plan.format!r}, not {PLAN_FORMAT!r}")
+    if plan.status is not PlanStatus.SOLVED:
+        out.add(1, None, None, f"status is {plan.status.value!r}" + (f": {plan.reason}" if plan.reason else ""))
+    if not plan.steps:
+        out.add(1, None, None, "the plan has no step")
+    for s, step in enumerate(plan.steps):
+        if not step.waypoints:
+            out.add(1, s, None, "the step has no waypoint")
+    warnings = _warnings(plan, scenario, flat) if len(flat) else []
+    support_checks = 0
+    if len(flat):
+        _rule1(plan, scenario, flat, out)
+        _rule2(world, flat, out)
+        _rule3(world, flat, out)
+        _rule4(world, flat, out)
+        _rule5(plan, flat, out)
+        _rule6(plan, flat, out)
+        _rule7(world, flat, out)
+        support_checks = len(flat)
+    for w in warnings:
+        log.info("warning: %s", w)
+    violations = tuple(sorted(out.violations, key=Violation.sort_key))
+    log.info("validated %d steps, %d waypoints: %d violations", len(plan.steps), len(flat), len(violations))
+    return ValidationReport(
+        valid=not violations,
+        violations=violations,
+        warnings=tuple(warnings),
+        steps_checked=len(plan.steps),
+        waypoints_checked=len(flat),
+        contacts_checked=int(flat.declared.sum()),
+        support_checks=support_checks,
+    )

@@ -1,0 +1,245 @@
+"""Plans (``ldhp-plan/1``): the model, reading, writing (atomic), round trips."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from geometry.poses import Pose
+from ldhp_tamp.errors import InputError, PlanFormatError
+from ldhp_tamp.plan import (
+    PLAN_FORMAT,
+    Family,
+    Plan,
+    PlanStats,
+    PlanStatus,
+    Step,
+    Waypoint,
+    plan_to_json,
+    read_plan,
+    read_plan_string,
+    write_plan,
+)
+
+#: The spec's examples: ``shared/`` sits beside the repository (``../shared`` from its root).
+EXAMPLES = Path(__file__).resolve().parents[3] / "shared" / "spec" / "examples"
+VALID = EXAMPLES / "pick-plan.json"
+
+
+@pytest.fixture(scope="module")
+def example() -> Plan:
+    return read_plan(VALID)
+
+
+def _odd_plan() -> Plan:
+    """A plan with awkward values: angles with many decimals, negative zero, nested
+    parameters, stats with extra keys."""
+    w0 = Waypoint(Pose.from_degrees(1.25, -0.0, 33.3333333), Pose.from_degrees(10, 20.5, -179.999),
+                  80.1234567, ((40.0, 70.0), None))
+    w1 = Waypoint(Pose.from_degrees(2.0, 0.0, 34.0), Pose.from_degrees(11, 20.5, -178.0), 80.0,
+                  (None, (1e-7, -3.5)))
+    step = Step("tip", Family.MOVE_OBJECT, {"pivot": "v2", "angle": 20.0, "nested": {"a": [1, 2.5]}},
+                ("l1-e1", "v2-e1"), (w0, w1))
+    stats = PlanStats("pyperplan", 8, 1810, 3, 1, 0, 42,
+                      {"symbolic": 0.1, "streams": 1.5, "grasp_graph": 2.25, "total": 4.0, "refine": 0.5},
+                      {"seed": 7, "note": "extra keys survive"})
+    return Plan(PLAN_FORMAT, "odd", "ab" * 32, PlanStatus.SOLVED, (step,), stats)
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def test_reads_the_spec_example(example: Plan) -> None:
+    assert example.format == PLAN_FORMAT and example.status is PlanStatus.SOLVED
+    assert [s.primitive for s in example.steps] == ["approach-contact", "close", "air-move"]
+    assert [s.family for s in example.steps] == [Family.ADJUST_GRASP, Family.ADJUST_GRASP, Family.MOVE_OBJECT]
+    assert [len(s.waypoints) for s in example.steps] == [31, 5, 21]
+    assert example.steps[2].contact_state == ("l1-e1", "free")
+    last = example.steps[-1].waypoints[-1]
+    assert last.object == Pose(0.0, 100.0, 0.0)
+    assert last.finger_contacts == ((0.0, 120.0), (100.0, 120.0))
+    assert example.steps[0].waypoints[0].finger_contacts == (None, None)
+    assert example.stats.engine == "hand-written example"
+    assert len(example.waypoints) == 57
+
+
+def test_angles_are_degrees_in_the_file_radians_inside() -> None:
+    text = plan_to_json(_odd_plan()).replace('"object": [2, 0, 34]', '"object": [2, 0, 90]')
+    plan = read_plan_string(text)
+    assert plan.steps[0].waypoints[1].object.theta == pytest.approx(math.pi / 2)
+
+
+def _mutate(example_text: str, edit) -> str:
+    data = json.loads(example_text)
+    edit(data)
+    return json.dumps(data)
+
+
+MALFORMED = [
+    ("not json", lambda d: None, "{not json", "not valid JSON"),
+    ("top-level list", None, "[]", "expected an object, got a list"),
+    ("missing format", lambda d: d.pop("format"), None, "missing key 'format'"),
+    ("other format", lambda d: d.update(format="ldhp-plan/2"), None, "format: unknown format 'ldhp-plan/2'"),
+    ("missing steps", lambda d: d.pop("steps"), None, "missing key 'steps'"),
+    ("missing stats", lambda d: d.pop("stats"), None, "missing key 'stats'"),
+    ("bad status", lambda d: d.update(status="ok"), None, "status: expected 'solved' or 'failed'"),
+    ("bad gripper", lambda d: d["steps"][2]["waypoints"][4].update(gripper=[1, 2]), None,
+     "steps[2].waypoints[4].gripper: expected [x, y, theta]"),
+    ("string in pose", lambda d: d["steps"][0]["waypoints"][0].update(object=[0, "0", 0]), None,
+     "steps[0].waypoints[0].object: expected [x, y, theta]"),
+    ("missing width", lambda d: d["steps"][1]["waypoints"][2].pop("width"), None,
+     "steps[1].waypoints[2]: missing key 'width'"),
+    ("boolean width", lambda d: d["steps"][1]["waypoints"][2].update(width=True), None,
+     "steps[1].waypoints[2].width: expected a number, got a boolean"),
+    ("one finger", lambda d: d["steps"][2]["waypoints"][0].update(finger_contacts=[[0, 20]]), None,
+     "steps[2].waypoints[0].finger_contacts: expected [finger 1, finger 2]"),
+    ("bad contact", lambda d: d["steps"][2]["waypoints"][0].update(finger_contacts=[[0, 20, 3], None]), None,
+     "steps[2].waypoints[0].finger_contacts[0]: expected [x, y] or null"),
+    ("bad family", lambda d: d["steps"][0].update(family="move"), None,
+     "steps[0].family: expected 'move-object' or 'adjust-grasp'"),
+    ("missing parameters", lambda d: d["steps"][0].pop("parameters"), None, "steps[0]: missing key 'parameters'"),
+    ("contact_state without to", lambda d: d["steps"][1]["contact_state"].pop("to"), None,
+     "steps[1].contact_state: missing key 'to'"),
+    ("waypoints not a list", lambda d: d["steps"][1].update(waypoints={}), None,
+     "steps[1].waypoints: expected a list, got an object"),
+    ("negative counter", lambda d: d["stats"].update(refinements=-1), None, "stats.refinements: expected a non-negative"),
+]
+
+
+@pytest.mark.parametrize("name, edit, text, fragment", MALFORMED, ids=[m[0] for m in MALFORMED])
+def test_malformed_plans_are_refused_with_file_and_json_path(name, edit, text, fragment) -> None:
+    source = text if text is not None else _mutate(VALID.read_text(), edit)
+    with pytest.raises(PlanFormatError) as err:
+        read_plan_string(source, "broken.json")
+    assert str(err.value).startswith("broken.json: ")
+    assert fragment in str(err.value)
+    assert isinstance(err.value, InputError)  # the CLI answers with exit status 2
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ('{"format": NaN}', "NaN is not a JSON number"),
+    ('{"format": "a", "format": "b"}', "duplicate key 'format'"),
+])
+def test_json_that_python_would_accept_is_still_refused(text: str, fragment: str) -> None:
+    with pytest.raises(PlanFormatError, match=fragment):
+        read_plan_string(text)
+
+
+def test_numbers_out_of_range_are_refused_anywhere() -> None:
+    for old in ('"width": 120', '"width": 100'):  # a waypoint's width; the close's parameters
+        text = VALID.read_text().replace(old, '"width": 1e999', 1)
+        with pytest.raises(PlanFormatError, match=r"number 1e999 is out of range"):
+            read_plan_string(text)
+
+
+def test_unreadable_and_non_utf8_files(tmp_path: Path) -> None:
+    with pytest.raises(PlanFormatError, match=r"missing\.json: cannot read"):
+        read_plan(tmp_path / "missing.json")
+    bad = tmp_path / "latin1.json"
+    bad.write_bytes(b'{"format": "\xe9"}')
+    with pytest.raises(PlanFormatError, match=r"latin1\.json: not UTF-8"):
+        read_plan(bad)
+
+
+def test_unknown_keys_are_ignored_but_stats_keeps_them() -> None:
+    data = json.loads(VALID.read_text())
+    data["comment"] = "ignored"
+    data["steps"][0]["waypoints"][0]["velocity"] = 3
+    data["stats"]["memory_mb"] = 12
+    plan = read_plan_string(json.dumps(data))
+    assert plan.stats.extra == {"memory_mb": 12}
+    assert '"memory_mb": 12' in plan_to_json(plan)
+
+
+def test_failed_plan_has_a_reason_and_no_steps() -> None:
+    failed = Plan(PLAN_FORMAT, "x", "0" * 64, "failed", (), PlanStats(), reason="tier 1: no path")
+    text = plan_to_json(failed)
+    assert '"steps": []' in text and '"reason": "tier 1: no path"' in text
+    back = read_plan_string(text)
+    assert back == failed and back.status is PlanStatus.FAILED
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def test_round_trip_of_the_example(example: Plan, tmp_path: Path) -> None:
+    path = write_plan(example, tmp_path / "plan.json")
+    assert read_plan(path) == example
+    assert plan_to_json(read_plan(path)) == path.read_text()
+
+
+def test_round_trip_of_awkward_values(tmp_path: Path) -> None:
+    plan = _odd_plan()
+    text = plan_to_json(plan)
+    back = read_plan_string(text)
+    assert plan_to_json(back) == text  # a fixed point after one write
+    w0 = back.steps[0].waypoints[0]
+    assert math.degrees(w0.object.theta) == pytest.approx(33.333333, abs=1e-9)  # 6 decimals
+    assert w0.width == 80.123457
+    assert back.steps[0].parameters == {"pivot": "v2", "angle": 20, "nested": {"a": [1, 2.5]}}
+    assert back.stats.time_s["refine"] == 0.5 and back.stats.extra["seed"] == 7
+    write_plan(back, tmp_path / "p.json")
+    assert read_plan(tmp_path / "p.json") == back
+
+
+def test_file_layout_is_stable_and_readable(example: Plan) -> None:
+    text = plan_to_json(example)
+    data = json.loads(text)
+    assert list(data) == ["format", "scenario", "scenario_sha256", "status", "steps", "stats"]
+    assert list(data["steps"][0]) == ["primitive", "family", "parameters", "contact_state", "waypoints"]
+    assert list(data["steps"][0]["waypoints"][0]) == ["object", "gripper", "width", "finger_contacts"]
+    assert list(data["stats"]["time_s"]) == ["symbolic", "streams", "grasp_graph", "total"]
+    # one waypoint per line
+    assert '{"object": [0, 100, 0], "gripper": [50, 102, 0], "width": 100, "finger_contacts": [[0, 120], [100, 120]]}' in text
+    assert "-0" not in plan_to_json(_odd_plan()).replace("-0.", "")  # no negative zero
+
+
+def test_write_replaces_atomically_and_leaves_no_temp_file(example: Plan, tmp_path: Path) -> None:
+    target = tmp_path / "plan.json"
+    target.write_text("old content")
+    os.chmod(target, 0o640)
+    write_plan(example, target)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plan.json"]
+    assert read_plan(target) == example
+    assert target.stat().st_mode & 0o777 == 0o640  # the file keeps its permissions
+
+
+def test_an_interrupted_write_leaves_the_old_file(example: Plan, tmp_path: Path, monkeypatch) -> None:
+    target = tmp_path / "plan.json"
+    target.write_text("old content")
+
+    def crash(src, dst):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "replace", crash)
+    with pytest.raises(KeyboardInterrupt):
+        write_plan(example, target)
+    assert target.read_text() == "old content"
+    assert [p.name for p in tmp_path.iterdir()] == ["plan.json"]
+
+
+def test_a_value_that_cannot_be_written_touches_nothing(example: Plan, tmp_path: Path) -> None:
+    target = tmp_path / "plan.json"
+    target.write_text("old content")
+    w = example.steps[0].waypoints[0]
+    bad = replace(example, steps=(replace(example.steps[0], waypoints=(replace(w, width=math.nan),)),))
+    with pytest.raises(ValueError, match="non-finite"):
+        write_plan(bad, target)
+    assert target.read_text() == "old content"
+    assert [p.name for p in tmp_path.iterdir()] == ["plan.json"]
+
+
+def test_model_coerces_and_checks() -> None:
+    step = Step("close", "adjust-grasp", {}, ["a", "b"], [])
+    assert step.family is Family.ADJUST_GRASP and step.contact_state == ("a", "b") and step.waypoints == ()
+    with pytest.raises(ValueError):
+        Step("x", "slide", {}, ("a", "b"), ())
+    with pytest.raises(ValueError):
+        Waypoint(Pose(0, 0, 0), Pose(0, 0, 0), 1.0, (None,))
+    with pytest.raises(TypeError):
+        step.parameters["k"] = 1  # read-only

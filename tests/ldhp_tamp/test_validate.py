@@ -1,0 +1,402 @@
+"""The plan validator: the seven rules of ``ldhp-plan/1`` and ``ldhp-tamp validate``.
+
+Test data: the spec's examples (``pick.toml``, a valid and an invalid plan) and
+``tests/data/plans/*.json``, each the valid example edited to break exactly one rule (the
+file's ``breaks_rule`` key says which; its ``description`` says how).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+
+from geometry.poses import Pose
+from ldhp_tamp.cli import main
+from ldhp_tamp.plan import Family, Plan, PlanStatus, Step, Waypoint, read_plan
+from ldhp_tamp.scenario import Scenario, load_scenario, load_scenario_string
+from ldhp_tamp.validate import ValidationReport, format_violation, validate_plan
+
+#: The spec's examples: ``shared/`` sits beside the repository (``../shared`` from its root).
+EXAMPLES = Path(__file__).resolve().parents[3] / "shared" / "spec" / "examples"
+BROKEN = Path(__file__).resolve().parents[1] / "data" / "plans"
+PICK_TOML = EXAMPLES / "pick.toml"
+VALID = EXAMPLES / "pick-plan.json"
+INVALID = EXAMPLES / "pick-plan-invalid.json"
+
+
+@pytest.fixture(scope="module")
+def pick() -> Scenario:
+    return load_scenario(PICK_TOML, check_planner=False)
+
+
+@pytest.fixture(scope="module")
+def plan() -> Plan:
+    return read_plan(VALID)
+
+
+def variant(edit: Callable[[str], str]) -> Scenario:
+    """pick.toml with its text edited (the sha256 changes with it)."""
+    text = edit(PICK_TOML.read_text())
+    return load_scenario_string(text, "pick-variant.toml", check_planner=False)
+
+
+def edit_step(plan: Plan, index: int, waypoints) -> Plan:
+    steps = list(plan.steps)
+    steps[index] = replace(steps[index], waypoints=tuple(waypoints))
+    return replace(plan, steps=tuple(steps))
+
+
+def where(report: ValidationReport) -> list[tuple[int, int | None, int | None, int | None]]:
+    return [(v.rule, v.step, v.waypoint, v.last_waypoint) for v in report.violations]
+
+
+# --------------------------------------------------------------------------- the examples
+
+
+def test_the_valid_example_is_valid(pick: Scenario, plan: Plan) -> None:
+    report = validate_plan(plan, pick)
+    assert report.valid and report.violations == () and report.warnings == ()
+    assert (report.steps_checked, report.waypoints_checked) == (3, 57)
+    assert report.contacts_checked == 2 * 22 and report.support_checks == 57
+
+
+def test_the_invalid_example_breaks_exactly_rules_5_and_7(pick: Scenario) -> None:
+    report = validate_plan(read_plan(INVALID), pick)
+    assert not report.valid and report.rules_broken == {5, 7}
+    # the lift (step 1): no finger at any waypoint; unsupported once off the table
+    assert where(report) == [(5, 1, 0, 20), (7, 1, 1, 20)]
+    assert report.warnings == ()
+
+
+BROKEN_FILES = sorted(BROKEN.glob("*.json"))
+
+
+def test_there_is_a_broken_plan_for_every_rule() -> None:
+    rules = sorted(json.loads(p.read_text())["breaks_rule"] for p in BROKEN_FILES)
+    assert rules == [1, 2, 3, 4, 5, 6, 7]
+
+
+@pytest.mark.parametrize("path", BROKEN_FILES, ids=[p.stem for p in BROKEN_FILES])
+def test_each_broken_plan_breaks_exactly_its_rule(path: Path, pick: Scenario) -> None:
+    rule = json.loads(path.read_text())["breaks_rule"]
+    report = validate_plan(read_plan(path), pick)
+    assert report.rules_broken == {rule}, [format_violation(v, read_plan(path)) for v in report.violations]
+
+
+# --------------------------------------------------------------------------- rule 1
+
+
+def test_a_failed_or_empty_plan_is_invalid(pick: Scenario, plan: Plan) -> None:
+    failed = replace(plan, status=PlanStatus.FAILED, steps=(), reason="no grasp sequence")
+    report = validate_plan(failed, pick)
+    assert where(report) == [(1, None, None, None), (1, None, None, None)]
+    assert "no grasp sequence" in report.violations[0].message + report.violations[1].message
+    other = validate_plan(replace(plan, format="ldhp-plan/0"), pick)
+    assert where(other) == [(1, None, None, None)]
+    empty = Step("wait", Family.ADJUST_GRASP, {}, ("l1-e1", "l1-e1"), ())
+    hollow = replace(plan, steps=plan.steps[:1] + (empty,) + plan.steps[1:])  # the others still join
+    assert where(validate_plan(hollow, pick)) == [(1, 1, None, None)]
+
+
+def test_steps_must_join(pick: Scenario, plan: Plan) -> None:
+    close = plan.steps[1].waypoints
+    # the close ends at 101.5 mm; the lift starts at 100 mm: a 1.5 mm seam
+    broken = edit_step(plan, 1, close[:4] + (replace(close[4], width=101.5),))
+    report = validate_plan(broken, pick)
+    assert where(report) == [(1, 2, 0, None)]
+    assert "width 101.50 -> 100.00 mm" in report.violations[0].message
+
+
+def test_the_start_grasp_is_checked(plan: Plan) -> None:
+    held = variant(lambda t: t + "start_grasp = { gripper = [50, 150, 0], width = 120 }\n")
+    assert validate_plan(plan, held).valid
+    elsewhere = variant(lambda t: t + "start_grasp = { gripper = [50, 148, 0.5], width = 118.5 }\n")
+    report = validate_plan(plan, elsewhere)
+    assert where(report) == [(1, 0, 0, None), (1, 0, 0, None)]
+    assert "start_grasp" in report.violations[0].message and "width" in report.violations[1].message
+
+
+def test_goal_release_means_no_finger_near_the_object(plan: Plan) -> None:
+    release = variant(lambda t: t.replace("goal = [0, 100, 0]", "goal = [0, 0, 0]\ngoal_release = true"))
+    approach = replace(plan, steps=plan.steps[:1])  # fingers end 10 mm from the block
+    assert validate_plan(approach, release).valid
+    # close to 101 mm without declaring contacts: each pad 0.5 mm from the block
+    last = approach.steps[0].waypoints[-1]
+    close = Step("close", Family.ADJUST_GRASP, {}, ("l1-e1", "l1-e1"),
+                 tuple(replace(last, width=w) for w in (120, 115, 110, 105, 101)))
+    report = validate_plan(replace(plan, steps=(approach.steps[0], close)), release)
+    assert where(report) == [(1, 1, 4, None), (1, 1, 4, None)]
+    assert "finger 1 still touches" in report.violations[0].message
+    # the valid plan ends holding the block: both fingers declare contacts
+    lifted = variant(lambda t: t + "goal_release = true\n")
+    assert validate_plan(plan, lifted).rules_broken == {1}
+
+
+# --------------------------------------------------------------------------- rule 2
+
+
+def test_width_changes_at_most_5_mm(pick: Scenario, plan: Plan) -> None:
+    close = plan.steps[1].waypoints
+    report = validate_plan(edit_step(plan, 1, [replace(close[0], width=w) for w in (120, 112, 106, 103)] + [close[4]]), pick)
+    assert where(report) == [(2, 1, 1, 2)]
+    assert "width changes 8.00 mm" in report.violations[0].message
+
+
+def test_continuity_holds_across_steps(pick: Scenario, plan: Plan) -> None:
+    # the approach stops 10 mm up; the close starts at 2 mm: an 8 mm jump over the seam
+    report = validate_plan(edit_step(plan, 0, plan.steps[0].waypoints[:-2]), pick)
+    assert report.rules_broken == {1, 2}
+    assert (2, 1, 0, None) in where(report)
+
+
+# --------------------------------------------------------------------------- rule 3
+
+
+@pytest.mark.parametrize("tip, penetrates", [(-1.9, False), (-2.1, True)])
+def test_penetration_tolerance_is_the_1_mm_erosion(pick: Scenario, plan: Plan, tip: float, penetrates: bool) -> None:
+    # a 10 mm wide fingertip d mm deep: the overlap eroded by 1 mm is empty iff d <= 2
+    last = plan.steps[0].waypoints[-1]
+    down = replace(last, gripper=Pose(last.gripper.x, tip, 0.0))
+    report = validate_plan(edit_step(plan, 0, plan.steps[0].waypoints + (down, last)), pick)
+    assert report.rules_broken == ({3} if penetrates else set())
+
+
+def test_the_palm_collides_with_the_object_but_not_with_the_fingers(plan: Plan) -> None:
+    # this palm overlaps the fingers' upper 5 mm: one rigid hand, not a violation
+    high = variant(lambda t: t.replace("opening = [0, 140]", "opening = [0, 140]\npalm = [[-90, 40], [90, 40], [90, 60], [-90, 60]]"))
+    assert validate_plan(plan, high).valid
+    low = variant(lambda t: t.replace("opening = [0, 140]", "opening = [0, 140]\npalm = [[-90, 30], [90, 30], [90, 50], [-90, 50]]"))
+    report = validate_plan(plan, low)
+    assert report.rules_broken == {3}
+    assert {v.message for v in report.violations} == {"the palm penetrates the object"}
+
+
+# --------------------------------------------------------------------------- rule 4
+
+
+def _shift_finger1(plan: Plan, dx: float) -> Plan:
+    def move(w: Waypoint) -> Waypoint:
+        c1, c2 = w.finger_contacts
+        return replace(w, finger_contacts=(None if c1 is None else (c1[0] + dx, c1[1]), c2))
+    plan = edit_step(plan, 1, map(move, plan.steps[1].waypoints))
+    return edit_step(plan, 2, map(move, plan.steps[2].waypoints))
+
+
+@pytest.mark.parametrize("dx, valid", [(-0.9, True), (-1.2, False), (0.9, True)])
+def test_declared_contacts_lie_within_1_mm_of_both_boundaries(pick: Scenario, plan: Plan, dx: float, valid: bool) -> None:
+    report = validate_plan(_shift_finger1(plan, dx), pick)
+    assert report.rules_broken == (set() if valid else {4})
+
+
+# --------------------------------------------------------------------------- rule 5
+
+
+def test_a_contact_cannot_come_and_go_within_a_move_object_step(pick: Scenario, plan: Plan) -> None:
+    lift = list(plan.steps[2].waypoints)
+    for j in range(5, 10):
+        lift[j] = replace(lift[j], finger_contacts=(lift[j].finger_contacts[0], None))
+    report = validate_plan(edit_step(plan, 2, lift), pick)
+    assert (5, 2, 5, 9) in where(report)
+    assert report.rules_broken == {5, 7}  # one horizontal finger cannot carry the block either
+
+
+# --------------------------------------------------------------------------- rule 6
+
+
+def test_the_object_may_not_turn_during_an_adjust_grasp_step(pick: Scenario, plan: Plan) -> None:
+    # turn the block 1.1 degrees about (50, 0): the origin moves 0.96 mm, both bottom
+    # corners stay within 1 mm of the table (still supported), the angle is off
+    a = math.radians(1.1)
+    turned = Pose(50 - 50 * math.cos(a), -50 * math.sin(a), a)
+    close = list(plan.steps[1].waypoints)
+    close[2] = replace(close[2], object=turned)
+    report = validate_plan(edit_step(plan, 1, close), pick)
+    assert where(report) == [(6, 1, 2, None)]
+    assert "1.10 deg" in report.violations[0].message
+
+
+# --------------------------------------------------------------------------- rule 7
+
+
+@pytest.mark.parametrize("height, rules", [(0.9, set()), (1.1, {1, 7})])
+def test_a_vertex_within_1_mm_of_an_edge_is_a_contact(plan: Plan, height: float, rules: set[int]) -> None:
+    still = variant(lambda t: t.replace("goal = [0, 100, 0]", "goal = [0, 0, 0]"))
+    approach = plan.steps[0]
+    floating = replace(approach, waypoints=tuple(replace(w, object=Pose(0, height, 0)) for w in approach.waypoints))
+    assert validate_plan(replace(plan, steps=(floating,)), still).rules_broken == rules
+
+
+TWO_POINT = '''format = "ldhp-scenario/1"
+name = "balance"
+[object]
+vertices = [[0, 0], [100, 0], [100, 40], [0, 40]]
+[[environment.solids]]
+name = "table"
+vertices = [[-300, -50], [300, -50], [300, 0], [-300, 0]]
+[gripper]
+model = "two-point"
+finger_radius = 5
+spacing = [80, 80]
+[friction]
+environment = 0.3
+gripper = 0.6
+[task]
+start = [0, 50, {angle}]
+goal = [0, 50, {angle}]
+'''
+
+
+@pytest.mark.parametrize("tilt, valid", [(0.0, True), (25.0, True), (40.0, False)])
+def test_at_an_object_vertex_the_finger_normal_counts(tilt: float, valid: bool) -> None:
+    """The block balances on its corner v1 with its centre of mass straight above, held
+    from below by a round finger (mu = 0.6: cone half-angle 31 degrees). The contact
+    force must be vertical; it is in the cone of the finger's radial normal if the
+    finger is at most 31 degrees off the vertical, whatever the corner's edges say."""
+    angle = 90.0 - math.degrees(math.atan2(20.0, 50.0))  # centre of mass above v1
+    scenario = load_scenario_string(TWO_POINT.format(angle=angle), "balance.toml", check_planner=False)
+    corner = np.array([0.0, 50.0])
+    t = math.radians(tilt)
+    centre = corner - 5.0 * np.array([math.sin(t), math.cos(t)])
+    gripper = Pose(centre[0] + 40.0, centre[1], 0.0)  # finger 1 at (-w/2, 0)
+    w = Waypoint(Pose(0.0, 50.0, math.radians(angle)), gripper, 80.0, ((0.0, 50.0), None))
+    step = Step("hold", Family.MOVE_OBJECT, {}, ("free", "free"), (w, w))
+    plan = Plan("ldhp-plan/1", "balance", scenario.sha256, PlanStatus.SOLVED, (step,), read_plan(VALID).stats)
+    report = validate_plan(plan, scenario)
+    assert report.rules_broken == (set() if valid else {7}), report.violations
+
+
+def test_a_contact_that_carries_no_force_does_not_spoil_support(plan: Plan) -> None:
+    """Closed cones: on a frictionless table the block also touches a wall on its left,
+    which can only push right; the equilibrium needs the wall's force to be zero. The
+    weight is balanced (an interior-margin test would say no)."""
+    walled = variant(lambda t: t.replace("environment = 0.3", "environment = 0.0").replace(
+        "[gripper]", '[[environment.solids]]\nname = "wall"\nvertices = [[-20, 0], [0, 0], [0, 60], [-20, 60]]\n\n[gripper]'
+    ).replace("goal = [0, 100, 0]", "goal = [0, 0, 0]"))
+    hover = replace(plan.steps[0], waypoints=plan.steps[0].waypoints[:1])  # the gripper 150 mm up
+    assert validate_plan(replace(plan, steps=(hover,)), walled).valid
+
+
+def test_rule_7_agrees_with_the_reference_linear_program(pick: Scenario) -> None:
+    """The validator's contacts and verdicts at waypoints of the valid, invalid and
+    one-finger plans, against geometry.mechanics.feasible_reference (cvxpy) at margin 0."""
+    from geometry import mechanics
+    from ldhp_tamp.validate import _contacts, _Flat, _support
+
+    for path in (VALID, INVALID, BROKEN / "rule7-unsupported.json", BROKEN / "rule5-sliding-contact.json"):
+        flat = _Flat.of(read_plan(path))
+        verdicts = _support(pick.world, flat)
+        for i in range(0, len(flat), 7):
+            c = _contacts(pick.world, flat.take(slice(i, i + 1)))
+            on = c.on[0]
+            if not on.any():
+                assert not verdicts[i]
+                continue
+            contacts = mechanics.Contacts.make(c.points[0][on], c.normals[0][on], c.mu[0][on])
+            com = Pose.from_array(flat.obj[i]).apply(pick.world.object.com)
+            ref = mechanics.feasible_reference(contacts, com, pick.world.object.length_scale, margin=0.0)
+            assert ref.feasible == verdicts[i], (path.name, i)
+
+
+# --------------------------------------------------------------------------- warnings
+
+
+def test_another_scenario_file_is_a_warning_not_a_violation(plan: Plan) -> None:
+    commented = variant(lambda t: "# the same problem, another file\n" + t)
+    report = validate_plan(plan, commented)
+    assert report.valid
+    assert len(report.warnings) == 1 and "sha256" in report.warnings[0]
+
+
+def test_a_width_outside_the_gripper_range_is_a_warning(plan: Plan) -> None:
+    narrow = variant(lambda t: t.replace("opening = [0, 140]", "opening = [0, 110]"))
+    report = validate_plan(plan, narrow)
+    assert report.valid
+    assert any("outside the gripper's range" in w and "at 33 waypoints" in w for w in report.warnings)
+
+
+# --------------------------------------------------------------------------- speed
+
+
+def test_a_long_plan_validates_quickly(pick: Scenario, plan: Plan) -> None:
+    """2,000 waypoints turning the held block about its centre of mass, 0.1 degree each."""
+    last = plan.steps[-1].waypoints[-1]
+    com = np.array([50.0, 120.0])
+    turn = []
+    for k in range(2000):
+        r = Pose(0.0, 0.0, math.radians(0.1 * k))
+
+        def about(p: Pose) -> Pose:
+            c = r.apply(p.position - com) + com
+            return Pose(float(c[0]), float(c[1]), p.theta + r.theta)
+
+        contacts = tuple(tuple(map(float, r.apply(np.array(c) - com) + com)) for c in last.finger_contacts)
+        turn.append(Waypoint(about(last.object), about(last.gripper), last.width, contacts))
+    long = replace(plan, steps=plan.steps + (Step("turn", Family.MOVE_OBJECT, {}, ("free", "free"), tuple(turn)),))
+    t0 = time.perf_counter()
+    report = validate_plan(long, pick)
+    elapsed = time.perf_counter() - t0
+    assert report.waypoints_checked == 2057
+    assert where(report) == [(1, 3, 1999, None)]  # it ends turned 199.9 degrees, not at the goal
+    assert elapsed < 3.0
+
+
+# --------------------------------------------------------------------------- the command line
+
+
+def test_cli_valid_plan(capsys) -> None:
+    assert main(["validate", str(VALID), "--scenario", str(PICK_TOML)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert len(out) == 1 and out[0].startswith("valid: ")
+
+
+def test_cli_prints_each_violation_then_a_verdict(capsys) -> None:
+    assert main(["validate", str(INVALID), "--scenario", str(PICK_TOML)]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("rule 5 (move-object keeps the grasp), step 1 (air-move), waypoints 0-20: ")
+    assert out[1].startswith("rule 7 (quasi-static support), step 1 (air-move), waypoints 1-20: ")
+    assert out[2].startswith("invalid: ") and "2 violations of rules 5" in out[2]
+    assert len(out) == 3
+
+
+def test_cli_warns_about_another_scenario_file(tmp_path: Path, capsys) -> None:
+    other = tmp_path / "pick.toml"
+    other.write_text("# edited\n" + PICK_TOML.read_text())
+    assert main(["validate", str(VALID), "--scenario", str(other)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("warning: ") and "sha256" in out[0] and out[1].startswith("valid: ")
+
+
+@pytest.mark.parametrize("plan_text, scenario_text, fragment", [
+    ("{", None, "not valid JSON"),
+    ('{"format": "ldhp-plan/1"}', None, "missing key"),
+    (None, "format = 'ldhp-scenario/1'\n", "scenario.toml"),
+])
+def test_cli_bad_input_exits_2_naming_the_file(tmp_path: Path, capsys, plan_text, scenario_text, fragment) -> None:
+    plan_path, scenario_path = VALID, PICK_TOML
+    if plan_text is not None:
+        plan_path = tmp_path / "plan.json"
+        plan_path.write_text(plan_text)
+    if scenario_text is not None:
+        scenario_path = tmp_path / "scenario.toml"
+        scenario_path.write_text(scenario_text)
+    assert main(["validate", str(plan_path), "--scenario", str(scenario_path)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith("error: ") and fragment in captured.err
+    assert (str(plan_path) if plan_text is not None else str(scenario_path)) in captured.err
+    assert "Traceback" not in captured.err
+
+
+def test_cli_missing_files_exit_2(tmp_path: Path, capsys) -> None:
+    assert main(["validate", str(tmp_path / "nope.json"), "--scenario", str(PICK_TOML)]) == 2
+    assert "nope.json: cannot read" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["validate", str(VALID)])  # --scenario is required
+    assert exc.value.code == 2
