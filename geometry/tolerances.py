@@ -22,6 +22,10 @@ PENETRATION_TOL: float = 0.1
 #: thin sliver at a vertex sink about twice its tolerance.
 SWEEP_TOL: float = 1e-4
 
+#: Overlap tolerance (mm) between a candidate grasp's fingers (and palm) and the object
+#: in the object frame: fingers that touch the object sit exactly on its boundary.
+GRASP_OBJECT_TOL: float = 1e-3
+
 #: Validator tolerances of the plan spec (``ldhp-plan/1``): contact and position (mm).
 VALIDATE_TOL: float = 1.0
 

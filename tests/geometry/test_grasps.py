@@ -1,0 +1,599 @@
+"""Tests of geometry.grasps: enumeration, pose-conditioned and motion-conditioned sets."""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from geometry import collision, contacts, mechanics
+from geometry.errors import GeometryError
+from geometry.grasps import (
+    NO_CONTACT,
+    FingerPart,
+    GraspOptions,
+    GraspSet,
+    MotionCheckOptions,
+    enumerate_grasps,
+    motion_conditioned,
+    pose_conditioned,
+)
+from geometry.poses import Pose
+from geometry.shapes import make_polygon
+from geometry.world import (
+    Environment,
+    Friction,
+    PolylineGripper,
+    Solid,
+    TwoPointGripper,
+    World,
+    make_object,
+)
+
+TABLE = [[500, 0], [-500, 0], [-500, -100], [500, -100]]
+BLOCK = [[0, 0], [70, 0], [70, 150], [0, 150]]  # 70 wide, 150 tall: l1 bottom, l2 right, l3 top, l4 left
+PICK_BLOCK = [[0, 0], [100, 0], [100, 40], [0, 40]]
+L_SHAPE = [[0, 0], [120, 0], [120, 40], [40, 40], [40, 100], [0, 100]]  # concave at (40, 40)
+TRIANGLE = [[0, 0], [90, 10], [30, 70]]
+FINGER = [[0, 0], [10, 0], [10, 40], [0, 40]]
+PALM = [[-90, 40], [90, 40], [90, 60], [-90, 60]]
+R = 5.0
+
+
+def make_world(gripper, obj=BLOCK, solids=(TABLE,), mu_env: float = 0.3, mu_grip: float = 0.6) -> World:
+    env = Environment(tuple(Solid(f"s{k}", make_polygon(v)) for k, v in enumerate(solids)))
+    return World(make_object(obj), env, gripper, Friction(mu_env, mu_grip))
+
+
+def zero_mobility() -> TwoPointGripper:
+    return TwoPointGripper(R, (90.0, 90.0))
+
+
+def polyline(palm: bool = True) -> PolylineGripper:
+    return PolylineGripper(make_polygon(FINGER), (0.0, 140.0), make_polygon(PALM) if palm else None)
+
+
+GRIPPERS = {
+    "two-point-fixed": zero_mobility,
+    "two-point-range": lambda: TwoPointGripper(R, (20.0, 140.0)),
+    "polyline-palm": lambda: polyline(True),
+    "polyline": lambda: polyline(False),
+    "polyline-tapered": lambda: PolylineGripper(make_polygon([[0, 0], [5, 0], [12, 40], [0, 40]]), (0.0, 120.0)),
+}
+OBJECTS = {"block": BLOCK, "pick-block": PICK_BLOCK, "L": L_SHAPE, "triangle": TRIANGLE}
+
+
+@lru_cache(maxsize=None)
+def grasp_set(gripper: str, obj: str = "block", k: int = 20) -> tuple[World, GraspSet]:
+    world = make_world(GRIPPERS[gripper](), OBJECTS[obj])
+    return world, enumerate_grasps(world, GraspOptions(samples_per_edge=k))
+
+
+def gripper_frame(gs: GraspSet, rows: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Object-frame points (B, 2, 2) of grasps ``rows`` in their gripper frames."""
+    g = gs.gripper[rows]
+    c, s = np.cos(g[:, 2])[:, None], np.sin(g[:, 2])[:, None]
+    d = points - g[:, None, :2]
+    return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], axis=-1)
+
+
+def boundary_distance(world: World, points: np.ndarray) -> np.ndarray:
+    ring = shapely.LinearRing(world.object.polygon.vertices)
+    return shapely.distance(ring, shapely.points(points.reshape(-1, 2))).reshape(points.shape[:-1])
+
+
+# --------------------------------------------------------------------------------------
+# Enumeration: structure
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("gripper", sorted(GRIPPERS))
+@pytest.mark.parametrize("obj", sorted(OBJECTS))
+def test_set_structure(gripper: str, obj: str) -> None:
+    world, gs = grasp_set(gripper, obj)
+    n = len(gs)
+    assert gs.gripper.shape == (n, 3) and gs.contact.shape == (n, 2, 2) and gs.flipped.shape == (n,)
+    # Row 0 is the no-contact grasp.
+    assert NO_CONTACT == 0 and gs.n_touching[0] == 0 and np.isnan(gs.gripper[0]).all() and gs.flipped[0] == -1
+    rest = slice(1, None)
+    assert (gs.n_touching[rest] >= 1).all()
+    assert (gs.n_touching == 2).sum() > 0 and (gs.n_touching == 1).sum() > 0
+    # Columns agree with each other.
+    t = gs.touching
+    assert np.array_equal(t, ~np.isnan(gs.contact[..., 0]))
+    assert np.array_equal(t, gs.feature >= 0) and np.array_equal(t, ~np.isnan(gs.arclength))
+    assert np.allclose(np.linalg.norm(gs.normal[t], axis=1), 1.0)
+    assert (gs.feature < 2 * gs.n_object).all()
+    lo, hi = world.gripper.width_range
+    assert ((gs.width[rest] >= lo - 1e-9) & (gs.width[rest] <= hi + 1e-9)).all()
+    assert ((gs.gripper[rest, 2] >= -math.pi) & (gs.gripper[rest, 2] < math.pi)).all()
+    assert ((gs.arclength[t] >= 0) & (gs.arclength[t] < gs.perimeter + 1e-9)).all()
+    # Arrays are read-only values.
+    with pytest.raises(ValueError):
+        gs.width[1] = 0.0
+    # No two rows share pose, width and touching pattern.
+    key = np.concatenate([np.round(gs.gripper[rest], 6), np.round(gs.width[rest, None], 6), gs.part[rest]], axis=1)
+    assert np.unique(key, axis=0).shape[0] == n - 1
+
+
+@pytest.mark.parametrize("gripper", sorted(GRIPPERS))
+def test_enumeration_is_deterministic_and_grows_with_k(gripper: str) -> None:
+    world, gs = grasp_set(gripper)
+    again = enumerate_grasps(world, GraspOptions(samples_per_edge=20))
+    for name in ("gripper", "width", "contact", "normal", "feature", "part", "arclength", "flipped"):
+        assert np.array_equal(getattr(gs, name), getattr(again, name), equal_nan=True), name
+    _, coarse = grasp_set(gripper, k=10)
+    assert (coarse.n_touching == 2).sum() < (gs.n_touching == 2).sum()
+    assert (coarse.n_touching == 1).sum() < (gs.n_touching == 1).sum()
+
+
+@pytest.mark.parametrize("gripper", sorted(GRIPPERS))
+@pytest.mark.parametrize("obj", sorted(OBJECTS))
+def test_contacts_lie_on_the_boundary_and_match_their_feature(gripper: str, obj: str) -> None:
+    world, gs = grasp_set(gripper, obj)
+    t = gs.touching
+    assert boundary_distance(world, gs.contact[t]).max() <= 1e-6
+    poly = world.object.polygon
+    n = gs.n_object
+    feat = gs.feature[t]
+    pts = gs.contact[t]
+    is_v = feat >= n
+    assert np.allclose(pts[is_v], poly.vertices[feat[is_v] - n])
+    e = feat[~is_v]
+    a, d = poly.vertices[e], poly.edge_directions[e]
+    off = pts[~is_v] - a
+    assert np.abs(off[:, 0] * d[:, 1] - off[:, 1] * d[:, 0]).max() <= 1e-6  # on the edge's line
+    along = np.sum(off * d, axis=1)
+    assert (along >= -1e-6).all() and (along <= poly.edge_lengths[e] + 1e-6).all()
+    # The boundary coordinate locates the contact.
+    cum = np.concatenate([[0.0], np.cumsum(poly.edge_lengths)[:-1]])
+    assert np.allclose(gs.arclength[t][~is_v], cum[e] + along, atol=1e-6)
+    # An edge contact pushes along the edge's inward normal; a vertex contact along a
+    # direction inside the vertex's (inward) normal fan.
+    assert np.allclose(gs.normal[t][~is_v], -poly.normals[e])
+    v = feat[is_v] - n
+    m = -gs.normal[t][is_v]
+    n_in, n_out = poly.normals[(v - 1) % n], poly.normals[v]
+    cross = lambda a, b: a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]  # noqa: E731
+    assert (cross(n_in, m) >= -1e-9).all() and (cross(m, n_out) >= -1e-9).all()
+
+
+@pytest.mark.parametrize("gripper", sorted(GRIPPERS))
+@pytest.mark.parametrize("obj", sorted(OBJECTS))
+def test_no_finger_overlaps_the_object(gripper: str, obj: str) -> None:
+    world, gs = grasp_set(gripper, obj)
+    rows = np.arange(1, len(gs))
+    # Nothing overlaps the object, even at a tolerance 100x tighter than the planner's.
+    assert not collision.gripper_object_overlap(world, np.zeros(3), gs.gripper[rows], gs.width[rows], 1e-3).any()
+    # A free finger is clear of the object; a touching one is within 1e-6 of it.
+    fs = collision.finger_shapes(world.gripper, gs.gripper[rows], gs.width[rows])
+    target = world.object.polygon.shapely
+    if fs.centres is not None:
+        dist = shapely.distance(target, shapely.points(fs.centres.reshape(-1, 2))).reshape(-1, 2) - R
+    else:
+        b, _, v, _ = fs.polygons.shape
+        dist = shapely.distance(target, shapely.polygons(fs.polygons.reshape(-1, v, 2))).reshape(-1, 2)
+    touching = gs.touching[rows]
+    assert (dist[~touching] > 0.1).all()
+    assert np.abs(dist[touching]).max() <= 1e-6
+
+
+# --------------------------------------------------------------------------------------
+# Configuration I
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("gripper", ["two-point-fixed", "two-point-range"])
+@pytest.mark.parametrize("obj", sorted(OBJECTS))
+def test_two_point_fingers_sit_on_their_contacts(gripper: str, obj: str) -> None:
+    world, gs = grasp_set(gripper, obj)
+    rows = np.arange(1, len(gs))
+    g = gs.gripper[rows]
+    ex = np.stack([np.cos(g[:, 2]), np.sin(g[:, 2])], axis=1)
+    centres = g[:, None, :2] + np.array([-0.5, 0.5])[None, :, None] * gs.width[rows, None, None] * ex[:, None, :]
+    assert np.allclose(np.linalg.norm(centres[:, 1] - centres[:, 0], axis=1), gs.width[rows])
+    t = gs.touching[rows]
+    # Finger centre = contact - r * inward normal.
+    assert np.abs(centres[t] - (gs.contact[rows][t] - R * gs.normal[rows][t])).max() <= 1e-6
+    assert (gs.part[rows][t] == FingerPart.CIRCLE).all()
+
+
+def test_zero_mobility_has_only_diagonal_pinches_across_the_block() -> None:
+    """90 mm between centres, r = 5, a 70 x 150 block: a square-on pinch across the 70 mm
+    width needs 80 mm, one between the 70 mm ends 160 mm; diagonal ones across the width
+    exist at cos(a) = 80 / 90 to the sides' normal."""
+    world, gs = grasp_set("two-point-fixed", k=100)
+    two = np.flatnonzero(gs.n_touching == 2)
+    f = gs.feature[two]
+    ex = np.stack([np.cos(gs.gripper[two, 2]), np.sin(gs.gripper[two, 2])], axis=1)
+    # Never both fingers on the 70 mm ends (l1, l3).
+    assert not np.isin(f, [0, 2]).all(axis=1).any()
+    # No pinch is square-on to the edges it touches.
+    n_out = -gs.normal[two]
+    assert (np.abs(np.sum(ex[:, None, :] * n_out, axis=2)) < 1 - 1e-3).all()
+    # Across the width (l2 and l4): every such pinch is at cos = 80 / 90.
+    across = np.sort(f, axis=1).tolist()
+    sides = np.array([a == [1, 3] for a in across])
+    assert sides.sum() > 0
+    assert np.allclose(np.abs(ex[sides, 0]), 80.0 / 90.0)
+
+
+def test_exact_fit_spacing_gives_square_on_pinches() -> None:
+    """Spacing 80 = 70 + 2 r: each sample on a long side has the square-on partner
+    (a tangent circle-line solution)."""
+    world = make_world(TwoPointGripper(R, (80.0, 80.0)))
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=10, vertex_fan=0))
+    two = np.flatnonzero((gs.n_touching == 2) & (gs.feature == 1).any(axis=1) & (gs.feature == 3).any(axis=1))
+    square = two[np.abs(np.cos(gs.gripper[two, 2])) > 1 - 1e-9]
+    # 10 samples on each side, each as finger 1, both finger orders: 20 distinct grasps.
+    assert square.size == 20
+    assert np.allclose(gs.contact[square, 0, 1], gs.contact[square, 1, 1])
+
+
+def test_range_two_point_closes_square_on() -> None:
+    world, gs = grasp_set("two-point-range", "pick-block")
+    two = np.flatnonzero(gs.n_touching == 2)
+    # Pinch of the 40 mm thickness from above/below: spacing 50, vertical finger line.
+    vertical = two[np.abs(np.sin(gs.gripper[two, 2])) > 1 - 1e-9]
+    assert vertical.size > 0 and np.allclose(gs.width[vertical], 50.0)
+    # End to end: 100 + 2 r = 110 mm, within the 20..140 range.
+    horizontal = two[np.abs(np.cos(gs.gripper[two, 2])) > 1 - 1e-9]
+    assert horizontal.size > 0 and np.allclose(gs.width[horizontal], 110.0)
+
+
+# --------------------------------------------------------------------------------------
+# Configuration II
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("gripper", ["polyline-palm", "polyline", "polyline-tapered"])
+@pytest.mark.parametrize("obj", sorted(OBJECTS))
+def test_polyline_contacts_lie_on_the_pads(gripper: str, obj: str) -> None:
+    world, gs = grasp_set(gripper, obj)
+    rows = np.flatnonzero(gs.n_touching >= 1)
+    local = gripper_frame(gs, rows, np.nan_to_num(gs.contact[rows]))
+    t = gs.touching[rows]
+    side = np.array([-0.5, 0.5])[None, :] * gs.width[rows, None]
+    assert np.abs(local[..., 0] - side)[t].max() <= 1e-6
+    y = local[..., 1][t]
+    assert (y >= -1e-6).all() and (y <= 40 + 1e-6).all()
+    part = gs.part[rows][t]
+    assert np.isin(part, [FingerPart.PAD, FingerPart.TIP]).all()
+    assert (np.abs(y[part == FingerPart.TIP]) <= 1e-6).all()
+
+
+def test_polyline_pinch_of_the_pick_block() -> None:
+    """The example plan's grasp: from above, pads on the 40 mm ends, opening 100."""
+    world, gs = grasp_set("polyline", "pick-block")
+    two = np.flatnonzero(gs.n_touching == 2)
+    above = two[(np.abs(gs.gripper[two, 2]) < 1e-9) & np.isclose(gs.width[two], 100.0)]
+    assert above.size > 0
+    assert (gs.feature[above] == [3, 1]).all()  # finger 1 on l4 (x = 0), finger 2 on l2 (x = 100)
+    assert np.allclose(gs.contact[above, 0, 1], gs.contact[above, 1, 1])  # level, antipodal
+    assert np.allclose(gs.normal[above], [[1, 0], [-1, 0]])
+    # The opening limit: the 150 mm block cannot be pinched end to end.
+    world, gs = grasp_set("polyline", "block")
+    two = np.flatnonzero(gs.n_touching == 2)
+    assert (gs.width[two] <= 140.0 + 1e-9).all()
+    assert not (np.isin(gs.feature[two], [0, 2]).all(axis=1) & (np.abs(np.sin(gs.gripper[two, 2])) > 0.999)).any()
+
+
+def test_palm_removes_grasps() -> None:
+    _, with_palm = grasp_set("polyline-palm")
+    _, without = grasp_set("polyline")
+    assert len(with_palm) < len(without)
+
+
+# --------------------------------------------------------------------------------------
+# Flip partners
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("gripper", sorted(GRIPPERS))
+@pytest.mark.parametrize("obj", sorted(OBJECTS))
+def test_flip_partners_swap_fingers_on_the_same_contacts(gripper: str, obj: str) -> None:
+    world, gs = grasp_set(gripper, obj)
+    g = np.flatnonzero(gs.flipped >= 0)
+    f = gs.flipped[g]
+    assert (f != g).all()
+    if gripper != "polyline-palm":  # a 180 mm palm turned over lands on the object
+        assert g.size > 0
+    assert np.array_equal(gs.flipped[f], g)  # an involution
+    assert np.allclose(gs.contact[f], gs.contact[g][:, ::-1], equal_nan=True, atol=1e-6)
+    assert np.array_equal(gs.feature[f], gs.feature[g][:, ::-1])
+    assert np.allclose(gs.width[f], gs.width[g])
+    dphi = np.mod(gs.gripper[f, 2] - gs.gripper[g, 2], 2 * math.pi)
+    assert np.allclose(dphi, math.pi)
+    if gripper.startswith("two-point"):
+        # The circles are point-symmetric: every grasp has its flip, about the same origin.
+        assert g.size == len(gs) - 1
+        assert np.allclose(gs.gripper[f, :2], gs.gripper[g, :2])
+
+
+# --------------------------------------------------------------------------------------
+# Pose-conditioned sets
+# --------------------------------------------------------------------------------------
+
+
+def world_fingers(world: World, gs: GraspSet, pose, rows) -> collision.FingerShapes:
+    return collision.finger_shapes(world.gripper, gs.world_gripper(pose, rows), gs.width[rows])
+
+
+def test_pose_conditioned_two_point_on_the_table() -> None:
+    world, gs = grasp_set("two-point-fixed")
+    kept = pose_conditioned(world, gs, [0.0, 0.0, 0.0])
+    assert kept[0] == NO_CONTACT and np.all(np.diff(kept) > 0)
+    removed = np.setdiff1d(np.arange(1, len(gs)), kept)
+    tol = 0.1
+    # Rule 3 against the half-plane y <= 0 (the table is far wider than the gripper):
+    # a circle overlaps iff its centre is below r - 2 tol.
+    low_kept = world_fingers(world, gs, [0, 0, 0], kept[1:]).centres[..., 1].min(axis=1)
+    low_removed = world_fingers(world, gs, [0, 0, 0], removed).centres[..., 1].min(axis=1)
+    assert (low_kept > R - 2 * tol - 1e-9).all()
+    assert (low_removed <= R - 2 * tol + 1e-9).all()
+    # Grasps touching the bottom edge have a finger under the table: all removed.
+    bottom = np.flatnonzero((gs.feature == 0).any(axis=1))
+    assert bottom.size > 0 and not np.isin(bottom, kept).any()
+    # In the air nothing collides.
+    assert len(pose_conditioned(world, gs, [0.0, 300.0, 0.3])) == len(gs)
+
+
+def test_pose_conditioned_follows_the_object_pose() -> None:
+    """Grasps on the top edge are kept on the table; turned upside down, they are not."""
+    world, gs = grasp_set("two-point-fixed")
+    top = np.flatnonzero((gs.feature == 2).any(axis=1) & (gs.n_touching == 1))
+    upright = pose_conditioned(world, gs, [0.0, 0.0, 0.0])
+    flipped = pose_conditioned(world, gs, [70.0, 150.0, math.pi])  # same footprint, upside down
+    assert np.isin(top, upright).mean() > 0.5
+    assert np.isin(top, flipped).mean() < np.isin(top, upright).mean()
+
+
+@pytest.mark.parametrize("gripper", ["polyline-palm", "polyline"])
+def test_pose_conditioned_polyline_on_the_table(gripper: str) -> None:
+    world, gs = grasp_set(gripper)
+    kept = pose_conditioned(world, gs, [0.0, 0.0, 0.0])
+    removed = np.setdiff1d(np.arange(1, len(gs)), kept)
+    assert removed.size > 0
+    fs = world_fingers(world, gs, [0, 0, 0], kept[1:])
+    assert fs.polygons[..., 1].min() >= -0.5  # nothing sinks into the table
+    fr = world_fingers(world, gs, [0, 0, 0], removed)
+    low = fr.polygons[..., 1].min(axis=(1, 2))
+    if fr.palm is not None:
+        low = np.minimum(low, fr.palm[..., 1].min(axis=1))
+    assert (low < 0.0).all()
+
+
+SLOT = [[300, 0], [0, 0], [0, 75], [-200, 75], [-200, -50], [500, -50], [500, 75], [300, 75]]
+
+
+@pytest.mark.parametrize("gripper", sorted(GRIPPERS))
+@pytest.mark.parametrize("pose", [(0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (80.0, 0.0, 1.2), (-60.0, 75.0, -0.4),
+                                  (150.0, 40.0, math.pi / 2)])
+def test_pose_conditioned_equals_the_plain_overlap_test(gripper: str, pose) -> None:
+    """The bounding-disk pre-filter changes nothing (slot environment: the gripper origin
+    can be inside a solid, near an edge, or far from all)."""
+    world = make_world(GRIPPERS[gripper](), solids=(SLOT,))
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=10))
+    kept = pose_conditioned(world, gs, pose)
+    hit = collision.gripper_env_overlap(world, gs.world_gripper(pose)[1:], gs.width[1:])
+    assert np.array_equal(kept, np.concatenate([[0], 1 + np.flatnonzero(~hit)]))
+    assert 1 < len(kept) < len(gs)
+
+
+# --------------------------------------------------------------------------------------
+# Motion-conditioned sets
+# --------------------------------------------------------------------------------------
+
+TASK2_FINGER = [[0, 0], [12, 0], [12, 45], [0, 45]]
+
+
+def straight(start, end, step: float = 4.0) -> np.ndarray:
+    start, end = np.asarray(start, float), np.asarray(end, float)
+    n = max(1, int(math.ceil(np.linalg.norm(end[:2] - start[:2]) / step)))
+    return start + np.linspace(0.0, 1.0, n + 1)[:, None] * (end - start)
+
+
+def tip_right(deg: float, step_deg: float = 0.5) -> np.ndarray:
+    """The 70 x 150 block tipping clockwise about its bottom-right corner (70, 0)."""
+    phi = np.radians(np.arange(0.0, deg + 1e-9, step_deg))
+    return np.stack([70.0 - 70.0 * np.cos(phi), 70.0 * np.sin(phi), -phi], axis=1)
+
+
+def candidates(world: World, gs: GraspSet, path: np.ndarray) -> np.ndarray:
+    return np.intersect1d(pose_conditioned(world, gs, path[0]), pose_conditioned(world, gs, path[-1]))
+
+
+@lru_cache(maxsize=None)
+def lift_world() -> tuple[World, GraspSet]:
+    world = make_world(PolylineGripper(make_polygon(TASK2_FINGER), (0.0, 140.0)), mu_env=0.3, mu_grip=0.6)
+    return world, enumerate_grasps(world, GraspOptions(samples_per_edge=20))
+
+
+def test_lift_in_the_air_needs_a_pinch() -> None:
+    world, gs = lift_world()
+    path = straight([0, 100, 0], [0, 140, 0])
+    cand = candidates(world, gs, path)
+    res = motion_conditioned(world, gs, path, cand)
+    assert len(res) > 0 and res.checks >= len(res) * len(path)
+    assert (gs.n_touching[res.indices] == 2).all()
+    # The pinches across the 70 mm width (pads on l2 and l4) are admissible.
+    across = cand[(np.sort(gs.feature[cand], axis=1) == [1, 3]).all(axis=1)]
+    assert across.size > 0 and np.isin(across, res.indices).all()
+    # A single finger on top pushes down: never admissible, whatever the rest.
+    on_top = cand[(gs.n_touching[cand] == 1) & (gs.feature[cand] == 2).any(axis=1)]
+    assert on_top.size > 0
+    assert motion_conditioned(world, gs, path, on_top).indices.size == 0
+    # Without friction at the fingers the vertical pads cannot carry the weight.
+    slippery = make_world(world.gripper, mu_env=0.3, mu_grip=0.0)
+    assert motion_conditioned(slippery, gs, path, across).indices.size == 0
+
+
+def test_quality_matches_the_mechanics_definition() -> None:
+    world, gs = lift_world()
+    path = straight([0, 0, 0], [0, 20, 0])  # lifting off the table: l1-e1 separates
+    res = motion_conditioned(world, gs, path, candidates(world, gs, path))
+    assert len(res) > 3
+    assert np.allclose(res.quality, (~res.force_closure) + res.alpha)
+    for k in np.linspace(0, len(res) - 1, 4).astype(int):
+        g = int(res.indices[k])
+        fingers, motion, com = one_grasp_contacts(world, gs, g, path)
+        q = mechanics.grasp_quality(fingers, motion, com, world.object.length_scale)
+        assert q.admissible
+        assert q.force_closure == res.force_closure[k]
+        assert math.isclose(q.value, res.quality[k], rel_tol=1e-9, abs_tol=1e-12)
+    # Weights.
+    w = motion_conditioned(world, gs, path, res.indices, MotionCheckOptions(w1=10.0, w2=0.0))
+    assert np.array_equal(w.indices, res.indices)
+    assert np.allclose(w.quality, 10.0 * ~res.force_closure)
+
+
+def one_grasp_contacts(world: World, gs: GraspSet, g: int, path: np.ndarray):
+    """Independent construction of one grasp's contacts along a path, for grasp_quality."""
+    env_pts, env_n, env_mu, env_modes, env_slide = [], [], [], [], []
+    for j, pose in enumerate(path):
+        cp = contacts.contact_points(world, Pose.from_array(pose))
+        a, b = (j, j + 1) if j + 1 < len(path) else (j - 1, j)
+        d, r = mechanics.pose_displacements(cp.points, path[a], path[b])
+        m = mechanics.classify_contacts(cp.normals, d, r[:, None], world.object.length_scale)
+        env_pts.append(cp.points), env_n.append(cp.normals), env_mu.append(cp.mu)
+        env_modes.append(m.codes[0]), env_slide.append(m.slide_dirs[0])
+    c = max(len(p) for p in env_pts)
+
+    def pad(xs, tail):
+        out = np.zeros((len(xs), c) + tail)
+        for j, x in enumerate(xs):
+            out[j, :len(x)] = x
+        return out
+
+    fp = np.stack([Pose.from_array(p).apply(np.nan_to_num(gs.contact[g])) for p in path])
+    fn = np.stack([Pose.from_array(p).apply_vector(np.nan_to_num(gs.normal[g])) for p in path])
+    mu = np.nan_to_num(gs.contact_mu(world)[g])
+    fm = np.where(gs.touching[g], mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
+    fingers = mechanics.Contacts.make(fp, fn, mu, fm)
+    motion = mechanics.Contacts.make(
+        np.concatenate([pad(env_pts, (2,)), fp], axis=1), np.concatenate([pad(env_n, (2,)), fn], axis=1),
+        np.concatenate([pad(env_mu, ()), np.broadcast_to(mu, (len(path), 2))], axis=1),
+        np.concatenate([pad(env_modes, ()), np.broadcast_to(fm, (len(path), 2))], axis=1).astype(np.int8),
+        np.concatenate([pad(env_slide, (2,)), np.zeros((len(path), 2, 2))], axis=1))
+    com = np.stack([Pose.from_array(p).apply(world.object.com) for p in path])
+    return fingers, motion, com
+
+
+@pytest.mark.parametrize("mu_env", [0.2, 0.3])
+def test_tip_by_one_finger_is_decided_by_the_mechanics(mu_env: float) -> None:
+    """Tip the standing 70 x 150 block (COM (35, 75)) clockwise about its corner (70, 0),
+    one finger pushing its left side (normal +x) at height h.
+
+    At the start the pivot is the only support (the bottom separates). With finger force
+    (f, k f), |k| <= mu_g, moments about the pivot give f (h + 70 k) = 35 m g and the pivot
+    must not slip: f <= mu_e (m g - k f). Eliminating f: 35 <= mu_e (h + 35 k), easiest at
+    k = mu_g. So h* = 35 / mu_e - 35 mu_g: 95.7 mm for mu_e = 0.3, mu_g = 0.6; for
+    mu_e = 0.2, h* = 154 mm, above the block. A 2-degree tip only gets easier.
+    """
+    world = make_world(zero_mobility(), mu_env=mu_env, mu_grip=0.6)
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=20))
+    path = tip_right(2.0)
+    cand = candidates(world, gs, path)
+    left = cand[(gs.n_touching[cand] == 1) & (gs.feature[cand] == 3).any(axis=1)]
+    h = np.nanmax(gs.contact[left, :, 1], axis=1)
+    h_star = 35.0 / mu_env - 35.0 * 0.6
+    assert left.size > 0 and h.max() > 140.0
+    res = motion_conditioned(world, gs, path, left)
+    admitted = np.isin(left, res.indices)
+    if mu_env == 0.2:
+        assert not admitted.any()
+    else:
+        assert admitted.any()
+        assert np.array_equal(admitted, h > h_star)
+        assert (~admitted).any()
+
+
+def test_collision_anywhere_along_the_path_excludes_a_grasp() -> None:
+    """A beam above the middle of a carry: grasps free at both ends that sweep through it
+    are not admissible; every admitted grasp is free at every sample."""
+    beam = [[95, 260], [105, 260], [105, 400], [95, 400]]
+    world = make_world(PolylineGripper(make_polygon(TASK2_FINGER), (0.0, 140.0)), solids=(TABLE, beam))
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=20))
+    path = straight([0, 100, 0], [200, 100, 0])
+    cand = candidates(world, gs, path)[1:]  # without the no-contact grasp
+    res = motion_conditioned(world, gs, path, cand)
+    hits = np.stack([collision.gripper_env_overlap(world, gs.world_gripper(p, cand), gs.width[cand]) for p in path])
+    swept = cand[hits.any(axis=0)]
+    assert swept.size > 0 and not np.isin(swept, res.indices).any()
+    assert len(res) > 0
+    assert np.array_equal(res.indices, motion_conditioned(world, gs, path, cand[~hits.any(axis=0)]).indices)
+
+
+def test_max_checks_truncates_and_counts() -> None:
+    world, gs = lift_world()
+    path = straight([0, 100, 0], [0, 140, 0])
+    cand = candidates(world, gs, path)
+    full = motion_conditioned(world, gs, path, cand, MotionCheckOptions(chunk=4))
+    assert not full.truncated and full.checks > 0
+    part = motion_conditioned(world, gs, path, cand, MotionCheckOptions(chunk=4), max_checks=full.checks // 3)
+    assert part.truncated and part.checks <= full.checks // 3
+    assert np.isin(part.indices, full.indices).all() and len(part) < len(full)
+    same = motion_conditioned(world, gs, path, cand, MotionCheckOptions(chunk=4), max_checks=full.checks)
+    assert not same.truncated and np.array_equal(same.indices, full.indices)
+
+
+def test_motion_conditioned_edge_cases() -> None:
+    world, gs = lift_world()
+    path = straight([0, 100, 0], [0, 140, 0])
+    # Row 0 and an empty candidate list give an empty set without any check.
+    for cand in ([], [NO_CONTACT]):
+        res = motion_conditioned(world, gs, path, cand)
+        assert len(res) == 0 and res.checks == 0 and not res.truncated
+    with pytest.raises(GeometryError):
+        motion_conditioned(world, gs, path, [-1])
+    # A single pose is a motionless segment: a pinch in the air holds.
+    one = motion_conditioned(world, gs, path[:1], np.arange(len(gs)))
+    assert len(one) > 0 and one.checks > 0
+
+
+# --------------------------------------------------------------------------------------
+# Random objects
+# --------------------------------------------------------------------------------------
+
+
+@st.composite
+def star_polygons(draw) -> list[list[float]]:
+    """Simple (star-shaped, possibly concave) polygons of 3..7 vertices, 20..80 mm."""
+    n = draw(st.integers(3, 7))
+    gaps = draw(st.lists(st.floats(0.3, 1.0), min_size=n, max_size=n))
+    radii = draw(st.lists(st.floats(20.0, 80.0), min_size=n, max_size=n))
+    ang = np.cumsum(np.asarray(gaps) / np.sum(gaps) * 2 * math.pi)
+    return [[float(r * math.cos(a)), float(r * math.sin(a))] for r, a in zip(radii, ang)]
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(obj=star_polygons(), gripper=st.sampled_from(["two-point-fixed", "two-point-range", "polyline-tapered"]))
+def test_invariants_on_random_objects(obj: list[list[float]], gripper: str) -> None:
+    world = make_world(GRIPPERS[gripper](), obj)
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=8))
+    rows = np.arange(1, len(gs))
+    t = gs.touching
+    assert (gs.n_touching[rows] >= 1).all()
+    assert boundary_distance(world, gs.contact[t]).max(initial=0.0) <= 1e-6
+    assert not collision.gripper_object_overlap(world, np.zeros(3), gs.gripper[rows], gs.width[rows], 1e-3).any()
+    f = gs.flipped
+    ok = np.flatnonzero(f >= 0)
+    assert np.array_equal(f[f[ok]], ok)
+    assert np.allclose(gs.contact[f[ok]], gs.contact[ok][:, ::-1], equal_nan=True, atol=1e-6)
+
+
+def test_bad_options_and_fingers_are_refused() -> None:
+    for bad in ({"samples_per_edge": 0}, {"pad_heights": (1.5,)}, {"tip_angles_deg": (90.0,)}, {"orientations": -1}):
+        with pytest.raises(GeometryError):
+            GraspOptions(**bad)
+    with pytest.raises(GeometryError):
+        MotionCheckOptions(chunk=0)
+    # A finger whose body is not at x >= 0 has no pad on x = 0.
+    hook = PolylineGripper(make_polygon([[-2, 0], [10, 0], [10, 40], [0, 40]]), (0.0, 140.0))
+    with pytest.raises(GeometryError, match="pad"):
+        enumerate_grasps(make_world(hook), GraspOptions(samples_per_edge=4))
