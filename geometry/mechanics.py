@@ -1,0 +1,1144 @@
+"""Quasi-static planar mechanics: contact modes, Coulomb-cone feasibility, grasp quality.
+
+Frame and units
+---------------
+The vertical plane: world x to the right, y up, gravity ``(0, -g)``. Lengths in mm,
+angles in radians, forces in newtons. A *contact* is a point on the object with a unit
+normal pointing INTO the object (the direction in which a pushing reaction acts on the
+object) and a Coulomb coefficient ``mu``. The object's weight ``m g`` acts at its centre of
+mass (a world point, ``com``).
+
+Normalised wrench space
+-----------------------
+A force ``f`` applied at world point ``p`` has the normalised wrench
+
+    w(f, p) = (f_x / (m g), f_y / (m g), ((p - com) x f) / (m g L))
+
+with ``L`` the object's length scale (:attr:`geometry.world.ObjectModel.length_scale`, the
+circumradius about the COM, so a contact on the object has ``|p - com| <= L``). The weight
+is balanced by the contact forces iff their wrenches sum to the *target* ``e_y = (0, 1, 0)``.
+
+Each contact contributes up to two *generators* (unit-force wrenches along the edges of its
+mode-dependent friction cone): STICKING/ROLLING give both edges ``(n +- mu t)/sqrt(1+mu^2)``
+(``t = (-n_y, n_x)``); SLIDING gives the single edge ``(n - mu s)/sqrt(1+mu^2)`` opposing the
+sliding direction ``s``; SEPARATING and ABSENT give none (zero generators); PENETRATING makes
+the whole instance infeasible.
+
+The feasibility margin
+----------------------
+With generators ``g_k`` (zero vectors for unused slots) the margin is the value of the LP
+
+    M = max s   subject to   sum_k lam_k g_k = e_y,   lam_k >= s   (all k),   s <= MARGIN_CAP,
+
+i.e. the largest normalised force (in units of ``m g``) that *every* generator can be made
+to carry in an equilibrium (``-inf`` when no equilibrium exists even with negative
+coefficients). ``M > 0`` iff ``e_y`` lies in the relative interior of the cone, so a block
+flat on a frictionless table is feasible while an equilibrium that needs a force exactly
+on a cone edge is not. Substituting ``lam_k = s + nu_k`` gives the identity used by the fast
+path:
+
+    M >= eps   <=>   e_y - eps * gbar  in  cone{g_k},      gbar = sum_k g_k,
+
+so the fast path decides ``M >= margin`` by one exact cone-membership test of a shifted
+target, and the reference path (cvxpy + Clarabel) computes ``M`` itself: both paths work
+with the same quantity. An instance is feasible iff ``M >= FEASIBILITY_MARGIN``.
+
+See ``docs/design/mechanics.md`` for the derivations and the tolerances.
+"""
+
+from __future__ import annotations
+
+import enum
+import functools
+import itertools
+import logging
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from geometry.errors import GeometryError
+from geometry.poses import Pose
+from geometry.tolerances import FEASIBILITY_MARGIN
+
+logger = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+ModeArray = NDArray[np.int8]
+
+#: Margins are reported saturated at this value (normalised force units). The LP margin is
+#: +inf exactly when the generators positively span a subspace containing e_y (e.g. a
+#: force-closure grasp); the cap keeps the reference LP bounded.
+MARGIN_CAP: float = 1.0
+
+#: Batch chunk of the fast path: the working set of one chunk stays in L2 cache.
+_CHUNK: int = 8192
+
+#: Two projected generators whose 2-D cross product is within this of zero count as
+#: parallel (the projected generators have norm <= ~1.5, rounding error ~5e-16).
+_CROSS_TOL: float = 1e-14
+
+#: A generator triple is used as a certificate only if |det| exceeds this, well above the
+#: determinant's rounding error (~6e-16 for generators of norm <= ~1.5), so its sign, and
+#: with it the certificate, is exact; thin cones (mu ~ 1e-8) still have |det| above it.
+_DET_TOL: float = 1e-12
+
+#: Relative tolerance of the degenerate (pair / single generator) certificates: the found
+#: cone element deviates from the target direction by at most this angle (radians).
+_DEGENERATE_TOL: float = 1e-12
+
+#: Friction coefficients below this are treated as exactly 0 (frictionless): a cone
+#: thinner than this is numerically neither a plane nor a solid cone.
+MU_ZERO: float = 1e-8
+
+#: Reference path: a least-squares residual of ``G lam = e_y`` above this (normalised)
+#: proves infeasibility without a solve (e_y outside the span of the generators).
+_SPAN_TOL: float = 1e-9
+
+#: Residual (normalised units) within which an inaccurate reference solution still counts
+#: as an equilibrium when its forces are verified.
+_VERIFY_TOL: float = FEASIBILITY_MARGIN
+
+
+# --------------------------------------------------------------------------------------
+# Modes, statuses and values
+# --------------------------------------------------------------------------------------
+
+
+class ContactMode(enum.IntEnum):
+    """Mode of one contact during a motion step; the integer value is the batch code.
+
+    ``ABSENT`` (0) pads batches with fewer contacts, so ``np.zeros`` is an empty batch.
+    ``PENETRATING`` marks a motion that pushes into a contact: the instance is infeasible.
+    """
+
+    ABSENT = 0
+    STICKING = 1
+    ROLLING = 2
+    SLIDING = 3
+    SEPARATING = 4
+    PENETRATING = 5
+
+
+class FeasibilityStatus(enum.Enum):
+    """Outcome of the reference feasibility check."""
+
+    FEASIBLE = "feasible"
+    INFEASIBLE = "infeasible"
+    UNKNOWN = "unknown"
+
+
+@dataclass(frozen=True)
+class ModeTolerances:
+    """Scale-aware thresholds of :func:`classify_contacts`.
+
+    For a batch instance with largest contact displacement ``d_max`` (mm) and largest
+    relative rotation ``r_max`` (rad) the threshold is
+    ``tol = max(relative * max(d_max, r_max * L), absolute)`` (mm), applied to the normal
+    and tangential displacement of every contact and to ``|rotation| * L``.
+
+    Attributes
+    ----------
+    relative : float
+        Fraction of the step's own size (dimensionless).
+    absolute : float
+        Floor in mm, used when the step does not move at all.
+    """
+
+    relative: float = 1e-3
+    absolute: float = 1e-6
+
+    def __post_init__(self) -> None:
+        if not (self.relative >= 0 and self.absolute > 0):
+            raise GeometryError(f"mode tolerances must be relative >= 0 and absolute > 0, got {self}")
+
+
+def _frozen(a: ArrayLike, dtype: Any) -> np.ndarray:
+    arr = np.array(a, dtype=dtype, copy=True)
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Contacts:
+    """A batch of point contacts on the object, in one frame (normally the world).
+
+    Build with :meth:`make`, which validates and broadcasts. Arrays are read-only copies.
+
+    Attributes
+    ----------
+    points : ndarray, shape (B, C, 2)
+        Contact points (mm).
+    normals : ndarray, shape (B, C, 2)
+        Unit normals pointing into the object (zero allowed only for ABSENT contacts).
+    mu : ndarray, shape (B, C)
+        Coulomb coefficients (>= 0).
+    modes : ndarray of int8, shape (B, C)
+        :class:`ContactMode` codes.
+    slide_dirs : ndarray, shape (B, C, 2)
+        For SLIDING contacts, the direction of the object's velocity at the contact
+        relative to the other body (only the sign of its component along
+        ``t = (-n_y, n_x)`` is used); ignored for other modes.
+    """
+
+    points: FloatArray
+    normals: FloatArray
+    mu: FloatArray
+    modes: ModeArray
+    slide_dirs: FloatArray
+
+    @classmethod
+    def make(
+        cls,
+        points: ArrayLike,
+        normals: ArrayLike,
+        mu: ArrayLike,
+        modes: ArrayLike = ContactMode.STICKING,
+        slide_dirs: ArrayLike | None = None,
+    ) -> "Contacts":
+        """Validate and broadcast contact arrays; ``(C, 2)`` points make a batch of one.
+
+        Parameters
+        ----------
+        points, normals : array_like, shape (B, C, 2) or (C, 2)
+        mu, modes : array_like, broadcastable to (B, C)
+        slide_dirs : array_like, broadcastable to (B, C, 2), optional
+
+        Examples
+        --------
+        >>> c = Contacts.make([[-1.0, -1.0], [1.0, -1.0]], [[0.0, 1.0], [0.0, 1.0]], 0.5)
+        >>> c.batch, c.count
+        (1, 2)
+        """
+        p = np.asarray(points, dtype=float)
+        if p.ndim == 2:
+            p = p[None]
+        if p.ndim != 3 or p.shape[-1] != 2:
+            raise GeometryError(f"contacts: points must have shape (B, C, 2), got {np.shape(points)}")
+        shape2 = p.shape
+        shape1 = p.shape[:2]
+        try:
+            n = np.broadcast_to(np.asarray(normals, dtype=float), shape2)
+            m = np.broadcast_to(np.asarray(mu, dtype=float), shape1)
+            md = np.broadcast_to(np.asarray(modes, dtype=np.int8), shape1)
+            s = np.zeros(shape2) if slide_dirs is None else np.broadcast_to(np.asarray(slide_dirs, dtype=float), shape2)
+        except ValueError as exc:
+            raise GeometryError(f"contacts: arrays do not broadcast to {shape2}: {exc}") from exc
+        if not (np.isfinite(p).all() and np.isfinite(n).all() and np.isfinite(s).all()):
+            raise GeometryError("contacts: points, normals and slide directions must be finite")
+        if not (np.isfinite(m).all() and (m >= 0).all()):
+            raise GeometryError("contacts: friction coefficients must be finite and >= 0")
+        if md.size and (md.min() < 0 or md.max() > max(ContactMode)):
+            raise GeometryError("contacts: unknown contact-mode code")
+        norm = np.hypot(n[..., 0], n[..., 1])
+        bad = (np.abs(norm - 1.0) > 1e-6) & (md != ContactMode.ABSENT)
+        if bad.any():
+            raise GeometryError(f"contacts: {int(bad.sum())} present contact(s) have a non-unit normal")
+        return cls(_frozen(p, float), _frozen(n, float), _frozen(m, float), _frozen(md, np.int8), _frozen(s, float))
+
+    @property
+    def batch(self) -> int:
+        """Number of instances B."""
+        return int(self.points.shape[0])
+
+    @property
+    def count(self) -> int:
+        """Contact slots per instance C."""
+        return int(self.points.shape[1])
+
+    def select(self, index: ArrayLike | slice) -> "Contacts":
+        """Sub-batch ``index`` (an index array, a boolean mask or a slice)."""
+        idx = index if isinstance(index, slice) else np.asarray(index)
+        return Contacts(*(_frozen(a[idx], a.dtype) for a in (self.points, self.normals, self.mu, self.modes, self.slide_dirs)))
+
+    def with_mu(self, mu: ArrayLike) -> "Contacts":
+        """The same contacts with other friction coefficients (broadcast to (B, C))."""
+        m = np.broadcast_to(np.asarray(mu, dtype=float), self.mu.shape)
+        if not (np.isfinite(m).all() and (m >= 0).all()):
+            raise GeometryError("contacts: friction coefficients must be finite and >= 0")
+        return Contacts(self.points, self.normals, _frozen(m, float), self.modes, self.slide_dirs)
+
+    def with_modes(self, modes: ArrayLike) -> "Contacts":
+        """The same contacts with other modes (broadcast to (B, C))."""
+        md = np.broadcast_to(np.asarray(modes, dtype=np.int8), self.modes.shape)
+        return Contacts.make(self.points, self.normals, self.mu, md, self.slide_dirs)
+
+
+@dataclass(frozen=True, eq=False)
+class ContactModes:
+    """Result of :func:`classify_contacts`.
+
+    Attributes
+    ----------
+    codes : ndarray of int8, shape (B, C)
+        :class:`ContactMode` codes.
+    slide_dirs : ndarray, shape (B, C, 2)
+        Unit tangent of the object's relative velocity at SLIDING contacts, zero elsewhere
+        (the friction force on the object opposes it).
+    normal : ndarray, shape (B, C)
+        Normal relative displacement (mm, > 0 separates).
+    tangential : ndarray, shape (B, C)
+        Relative displacement along ``t = (-n_y, n_x)`` (mm).
+    tolerance : ndarray, shape (B,)
+        The per-instance threshold used (mm).
+    """
+
+    codes: ModeArray
+    slide_dirs: FloatArray
+    normal: FloatArray
+    tangential: FloatArray
+    tolerance: FloatArray
+
+    @property
+    def penetrating(self) -> BoolArray:
+        """(B,) True where some contact is pushed into (the motion is infeasible)."""
+        return (self.codes == ContactMode.PENETRATING).any(axis=1)
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceResult:
+    """Outcome of :func:`feasible_reference` for one instance.
+
+    Attributes
+    ----------
+    status : FeasibilityStatus
+    margin : float
+        The LP margin ``M`` (normalised, capped at :data:`MARGIN_CAP`); ``-inf`` when the
+        LP is infeasible, ``nan`` when unknown.
+    forces : ndarray, shape (C, 2), or None
+        Contact forces on the object in newtons (world frame) when FEASIBLE.
+    solver_status : str
+        The raw cvxpy status string, or a note when the solver was not called or raised.
+    """
+
+    status: FeasibilityStatus
+    margin: float
+    forces: FloatArray | None
+    solver_status: str
+
+    @property
+    def feasible(self) -> bool:
+        return self.status is FeasibilityStatus.FEASIBLE
+
+
+@dataclass(frozen=True)
+class GraspQuality:
+    """Grasp quality ``S = w1 * s + w2 * alpha`` of a grasp along one motion.
+
+    Attributes
+    ----------
+    value : float
+        ``S`` (lower is better); ``nan`` when ``alpha`` is undefined.
+    force_closure : bool
+        The finger contacts alone are force closure at every sample.
+    s : int
+        ``0`` if force closure, else ``1``.
+    alpha : float
+        Mean reaction angle (radians) over the samples with a sticking/rolling contact.
+    admissible : bool
+        Every sample of the motion is quasi-statically feasible.
+    """
+
+    value: float
+    force_closure: bool
+    s: int
+    alpha: float
+    admissible: bool
+
+
+# --------------------------------------------------------------------------------------
+# Motion -> contact modes
+# --------------------------------------------------------------------------------------
+
+
+def _as_poses(poses: Pose | ArrayLike) -> FloatArray:
+    if isinstance(poses, Pose):
+        return poses.as_array()[None]
+    return np.asarray(poses, dtype=float).reshape(-1, 3)
+
+
+def pose_displacements(points: ArrayLike, pose_from: Pose | ArrayLike, pose_to: Pose | ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Displacement of the object's material points when it moves between two poses.
+
+    The object point at world ``p`` (at ``pose_from``) goes to
+    ``R(theta1 - theta0) (p - o0) + o1``, ``o`` the pose positions.
+
+    Parameters
+    ----------
+    points : array_like, shape (B, C, 2) or (C, 2)
+        World contact points at ``pose_from``.
+    pose_from, pose_to : Pose or array_like, shape (3,) or (B, 3)
+
+    Returns
+    -------
+    displacements : ndarray, shape (B, C, 2)
+        mm.
+    rotations : ndarray, shape (B,)
+        ``theta1 - theta0`` (rad, not wrapped: pass small steps).
+
+    Examples
+    --------
+    >>> d, r = pose_displacements([[1.0, 0.0]], Pose(0, 0, 0), Pose(0, 0, math.pi / 2))
+    >>> np.round(d, 12).tolist(), float(r[0]) == math.pi / 2
+    ([[[-1.0, 1.0]]], True)
+    """
+    p = np.asarray(points, dtype=float)
+    if p.ndim == 2:
+        p = p[None]
+    a, b = _as_poses(pose_from), _as_poses(pose_to)
+    dth = b[:, 2] - a[:, 2]
+    c, s = np.cos(dth)[:, None], np.sin(dth)[:, None]
+    rx = p[..., 0] - a[:, 0:1]
+    ry = p[..., 1] - a[:, 1:2]
+    out = np.empty(np.broadcast_shapes(p.shape, (dth.shape[0], 1, 2)))
+    out[..., 0] = c * rx - s * ry + b[:, 0:1] - p[..., 0]
+    out[..., 1] = s * rx + c * ry + b[:, 1:2] - p[..., 1]
+    return out, np.broadcast_to(dth, out.shape[:1]).copy()
+
+
+def twist_displacements(points: ArrayLike, twist: ArrayLike, reference: ArrayLike) -> FloatArray:
+    """Velocity of the object's points under a planar twist about a reference point.
+
+    ``v(p) = (vx, vy) + omega * (-(p_y - r_y), p_x - r_x)``; multiply by a step to get
+    a displacement.
+
+    Parameters
+    ----------
+    points : array_like, shape (B, C, 2) or (C, 2)
+    twist : array_like, shape (3,) or (B, 3)
+        ``(vx, vy, omega)``: velocity of the reference point (mm per step) and rotation
+        rate (rad per step).
+    reference : array_like, shape (2,) or (B, 2)
+
+    Returns
+    -------
+    ndarray, shape (B, C, 2)
+    """
+    p = np.asarray(points, dtype=float)
+    if p.ndim == 2:
+        p = p[None]
+    tw = np.asarray(twist, dtype=float).reshape(-1, 3)
+    ref = np.asarray(reference, dtype=float).reshape(-1, 2)
+    w = tw[:, 2:3]
+    out = np.empty(np.broadcast_shapes(p.shape, (tw.shape[0], 1, 2), (ref.shape[0], 1, 2)))
+    out[..., 0] = tw[:, 0:1] - w * (p[..., 1] - ref[:, 1:2])
+    out[..., 1] = tw[:, 1:2] + w * (p[..., 0] - ref[:, 0:1])
+    return out
+
+
+def classify_contacts(
+    normals: ArrayLike,
+    displacements: ArrayLike,
+    rotations: ArrayLike,
+    length_scale: float | ArrayLike,
+    tolerances: ModeTolerances = ModeTolerances(),
+    present: ArrayLike | None = None,
+) -> ContactModes:
+    """Classify each contact of a motion step.
+
+    ``displacements`` are those of the object's material point at each contact relative
+    to the other body (for an environment contact the object's own displacement; for a
+    finger contact subtract the finger point's displacement), ``rotations`` the object's
+    rotation relative to the other body. With ``tol`` from :class:`ModeTolerances`:
+
+    - normal displacement ``d.n > tol`` -> SEPARATING; ``< -tol`` -> PENETRATING;
+    - else tangential ``|d.t| <= tol`` -> STICKING if ``|rotation| * L <= tol`` else ROLLING;
+    - else SLIDING with direction ``sign(d.t) t``.
+
+    Parameters
+    ----------
+    normals : array_like, shape (B, C, 2) or (C, 2)
+        Unit normals into the object.
+    displacements : array_like, shape (B, C, 2) or (C, 2)
+        Relative displacement per step (mm).
+    rotations : array_like, broadcastable to (B, C)
+        Relative rotation per step (rad); a (B,) array must be passed as (B, 1).
+    length_scale : float or array_like, broadcastable to (B,)
+        Object length scale ``L`` (mm), converts rotation to mm.
+    tolerances : ModeTolerances
+    present : array_like of bool, broadcastable to (B, C), optional
+        False marks padding slots, classified ABSENT.
+
+    Returns
+    -------
+    ContactModes
+
+    Examples
+    --------
+    >>> m = classify_contacts([[0.0, 1.0]], [[1.0, 0.0]], 0.0, 10.0)
+    >>> ContactMode(int(m.codes[0, 0])).name, m.slide_dirs[0, 0].tolist()
+    ('SLIDING', [1.0, 0.0])
+    """
+    n = np.asarray(normals, dtype=float)
+    d = np.asarray(displacements, dtype=float)
+    if n.ndim == 2:
+        n = n[None]
+    if d.ndim == 2:
+        d = d[None]
+    n, d = np.broadcast_arrays(n, d)
+    shape = n.shape[:2]
+    rot = np.broadcast_to(np.asarray(rotations, dtype=float), shape)
+    L = np.broadcast_to(np.asarray(length_scale, dtype=float).reshape(-1), (shape[0],))
+    tx, ty = -n[..., 1], n[..., 0]
+    vn = d[..., 0] * n[..., 0] + d[..., 1] * n[..., 1]
+    vt = d[..., 0] * tx + d[..., 1] * ty
+    rot_mm = np.abs(rot) * L[:, None]
+    live = np.ones(shape, bool) if present is None else np.broadcast_to(np.asarray(present, bool), shape)
+    dmag = np.where(live, np.hypot(d[..., 0], d[..., 1]), 0.0)
+    scale = np.maximum(dmag.max(axis=1, initial=0.0), np.where(live, rot_mm, 0.0).max(axis=1, initial=0.0))
+    tol = np.maximum(tolerances.relative * scale, tolerances.absolute)
+    t2 = tol[:, None]
+    codes = np.full(shape, ContactMode.STICKING, dtype=np.int8)
+    codes[rot_mm > t2] = ContactMode.ROLLING
+    sliding = np.abs(vt) > t2
+    codes[sliding] = ContactMode.SLIDING
+    codes[vn > t2] = ContactMode.SEPARATING
+    codes[vn < -t2] = ContactMode.PENETRATING
+    codes[~live] = ContactMode.ABSENT
+    sl = codes == ContactMode.SLIDING
+    sgn = np.where(sl, np.sign(vt), 0.0)
+    slide = np.stack([sgn * tx, sgn * ty], axis=-1) + 0.0  # no negative zeros
+    return ContactModes(_frozen(codes, np.int8), _frozen(slide, float), _frozen(vn, float), _frozen(vt, float), _frozen(tol, float))
+
+
+# --------------------------------------------------------------------------------------
+# Generators
+# --------------------------------------------------------------------------------------
+
+
+Rows = list[FloatArray]
+
+
+def _generators_chunk(
+    contacts: Contacts, sl: slice, com: FloatArray, inv_L: FloatArray, mu_override: FloatArray | None = None
+) -> tuple[Rows, Rows, Rows, BoolArray]:
+    """Generators of a chunk as rows: ``X[k], Y[k], Z[k]`` are (b,) arrays, slot k = 2i or
+    2i+1 of contact i; plus the chunk's penetrating flags (b,).
+
+    Rows (not one (3, K, b) block) keep every allocation under the allocator's mmap
+    threshold, so repeated calls do not page-fault.
+    """
+    pts = contacts.points[sl]
+    nrm = contacts.normals[sl]
+    modes = contacts.modes[sl]
+    mus = contacts.mu[sl] if mu_override is None else mu_override
+    cx = com[sl, 0] if com.shape[0] > 1 else com[0, 0]
+    cy = com[sl, 1] if com.shape[0] > 1 else com[0, 1]
+    il = inv_L[sl] if inv_L.shape[0] > 1 else inv_L[0]
+    pen = (modes == ContactMode.PENETRATING).any(axis=1)
+    X: Rows = []
+    Y: Rows = []
+    Z: Rows = []
+    for i in range(contacts.count):
+        md = modes[:, i]
+        full = (md == ContactMode.STICKING) | (md == ContactMode.ROLLING)
+        sliding = md == ContactMode.SLIDING
+        nx = np.ascontiguousarray(nrm[:, i, 0])
+        ny = np.ascontiguousarray(nrm[:, i, 1])
+        rx = (pts[:, i, 0] - cx) * il
+        ry = (pts[:, i, 1] - cy) * il
+        mu = mus[:, i]
+        mu = np.where(mu < MU_ZERO, 0.0, mu)
+        # slot 2i: edge n + mA t (mA = mu, or -sign(s.t) mu when sliding); 2i+1: n - mu t
+        if sliding.any():
+            st = -contacts.slide_dirs[sl, i, 0] * ny + contacts.slide_dirs[sl, i, 1] * nx
+            mA = np.where(sliding, -np.sign(st) * mu, mu)
+            wA = full | sliding
+        else:
+            mA, wA = mu, full
+        for m, w in ((mA, wA), (-mu, full)):
+            inv = w / np.sqrt(1.0 + m * m)
+            dx = (nx - m * ny) * inv
+            dy = (ny + m * nx) * inv
+            X.append(dx)
+            Y.append(dy)
+            Z.append(rx * dy - ry * dx)
+    return X, Y, Z, pen
+
+
+def _com_and_scale(com: ArrayLike, length_scale: float | ArrayLike, batch: int) -> tuple[FloatArray, FloatArray]:
+    c = np.asarray(com, dtype=float).reshape(-1, 2)
+    L = np.asarray(length_scale, dtype=float).reshape(-1)
+    if c.shape[0] not in (1, batch) or L.shape[0] not in (1, batch):
+        raise GeometryError(f"com / length_scale must be per batch ({batch}) or single")
+    if not (np.isfinite(c).all() and np.isfinite(L).all() and (L > 0).all()):
+        raise GeometryError("com must be finite and length_scale positive")
+    return c, 1.0 / L
+
+
+def wrench_generators(contacts: Contacts, com: ArrayLike, length_scale: float | ArrayLike) -> tuple[FloatArray, BoolArray]:
+    """Normalised wrench generators of the mode-dependent friction cones.
+
+    Slot ``2i`` of contact ``i`` holds the edge ``(n + mu t)/sqrt(1+mu^2)`` (for a SLIDING
+    contact the edge opposing sliding instead), slot ``2i+1`` the edge
+    ``(n - mu t)/sqrt(1+mu^2)``; unused slots are zero. A generator with force direction
+    ``d`` at point ``p`` is ``(d_x, d_y, ((p - com) x d) / L)``. Coefficients below
+    :data:`MU_ZERO` count as 0.
+
+    Parameters
+    ----------
+    contacts : Contacts
+    com : array_like, shape (2,) or (B, 2)
+        World centre of mass (mm).
+    length_scale : float or array_like, shape (B,)
+        ``L`` (mm).
+
+    Returns
+    -------
+    generators : ndarray, shape (B, 2C, 3)
+    penetrating : ndarray of bool, shape (B,)
+    """
+    c, il = _com_and_scale(com, length_scale, contacts.batch)
+    X, Y, Z, pen = _generators_chunk(contacts, slice(None), c, il)
+    K, B = len(X), contacts.batch
+    out = np.zeros((B, K, 3))
+    for k in range(K):
+        out[:, k, 0], out[:, k, 1], out[:, k, 2] = X[k], Y[k], Z[k]
+    return out, pen
+
+
+# --------------------------------------------------------------------------------------
+# Exact cone membership (the fast path)
+# --------------------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=None)
+def _index_tables(k: int) -> tuple[tuple[tuple[int, int], ...], tuple[tuple[int, int, int, int, int, int], ...]]:
+    """Pairs (j, k) and triples (i, j, k, idx(jk), idx(ik), idx(ij)) of k slots."""
+    pairs = tuple(itertools.combinations(range(k), 2))
+    pid = {p: n for n, p in enumerate(pairs)}
+    triples = tuple((i, j, m, pid[(j, m)], pid[(i, m)], pid[(i, j)]) for i, j, m in itertools.combinations(range(k), 3))
+    return pairs, triples
+
+
+def _reduce_to_ey(X: Rows, Y: Rows, Z: Rows, t: tuple[FloatArray, FloatArray, FloatArray]) -> tuple[Rows, Rows, Rows, BoolArray]:
+    """Map each instance linearly so that its target becomes a positive multiple of e_y.
+
+    Returns rows ``P, Q, A``: the generators' two components orthogonal (after the map)
+    to the target and their component along it, and a (b,) mask of zero targets (which
+    are trivially in the cone). Cone membership is invariant under invertible linear maps.
+    """
+    tx, ty, tz = t
+    ax, ay, az = np.abs(tx), np.abs(ty), np.abs(tz)
+    zero = np.maximum(np.maximum(ax, ay), az) == 0.0
+    if (ty > 0).all() and (ay >= ax).all() and (ay >= az).all():
+        u, v, w = tx, ty, tz
+    else:  # permute coordinates so that the largest |component| sits in the middle slot
+        kx = (ax >= ay) & (ax >= az)
+        kz = ~kx & (az > ay)
+        sgn = np.where(kx, np.sign(tx), np.where(kz, np.sign(tz), np.sign(ty)))
+        sgn[zero] = 1.0
+
+        def perm(x: FloatArray, y: FloatArray, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+            return np.where(kx, y, x), np.where(kx, x, np.where(kz, z, y)) * sgn, np.where(kz, y, z)
+
+        X, Y, Z = (list(r) for r in zip(*(perm(x, y, z) for x, y, z in zip(X, Y, Z)))) if X else ([], [], [])
+        u, v, w = perm(tx, ty, tz)
+        v = np.where(zero, 1.0, v)
+    # shear (x, y, z) -> (x - (u/v) y, y, z - (w/v) y): maps (u, v, w) to (0, v, 0), v > 0
+    a, c = u / v, w / v
+    P = [x - a * y for x, y in zip(X, Y)]
+    Q = [z - c * y for z, y in zip(Z, Y)]
+    return P, Q, list(Y), zero
+
+
+def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
+    """Is e_y in the cone of the generators ``(P_k, A_k, Q_k)``? Exact up to tolerances.
+
+    e_y is in the cone iff some lam >= 0 has ``sum lam (P, Q) = 0`` and ``sum lam A > 0``.
+    Carathéodory: a certificate uses at most three generators. For a triple (i, j, k) the
+    2-D crosses ``c_jk = P_j Q_k - Q_j P_k`` give the unique zero combination
+    ``lam = (c_jk, -c_ik, c_ij)``; the triple certifies iff lam has one sign and
+    ``D = A_i c_jk - A_j c_ik + A_k c_ij`` (the 3x3 determinant) has the same sign.
+    """
+    acc = np.zeros(b, dtype=bool)
+    live = [k for k in range(len(P)) if P[k].any() or Q[k].any() or A[k].any()]
+    P, Q, A = [P[k] for k in live], [Q[k] for k in live], [A[k] for k in live]
+    if len(live) >= 3:
+        pairs, triples = _index_tables(len(live))
+        tmp = np.empty(b)
+        # A one- or two-generator certificate needs a pair with |c_jk| <= |r| <= 3 tol
+        # (|p| <= 1.5, |A| <= 1): only such instances go to the degenerate test.
+        maybe = np.zeros(b, dtype=bool)
+        small = np.empty(b, dtype=bool)
+        C: Rows = []
+        GE: list[BoolArray] = []
+        LE: list[BoolArray] = []
+        for j, k in pairs:
+            c = P[j] * Q[k]
+            np.multiply(Q[j], P[k], out=tmp)
+            c -= tmp
+            C.append(c)
+            GE.append(c >= -_CROSS_TOL)
+            LE.append(c <= _CROSS_TOL)
+            np.abs(c, out=tmp)
+            maybe |= np.less_equal(tmp, 3.0 * _DEGENERATE_TOL, out=small)
+        D = np.empty(b)
+        m1 = np.empty(b, dtype=bool)
+        m2 = np.empty(b, dtype=bool)
+        for i, j, k, jk, ik, ij in triples:
+            np.multiply(A[i], C[jk], out=D)
+            np.multiply(A[j], C[ik], out=tmp)
+            D -= tmp
+            np.multiply(A[k], C[ij], out=tmp)
+            D += tmp
+            np.logical_and(GE[jk], LE[ik], out=m1)
+            m1 &= GE[ij]
+            m1 &= np.greater(D, _DET_TOL, out=m2)
+            acc |= m1
+            np.logical_and(LE[jk], GE[ik], out=m1)
+            m1 &= LE[ij]
+            m1 &= np.less(D, -_DET_TOL, out=m2)
+            acc |= m1
+        rest = np.flatnonzero(maybe & ~acc)
+    else:
+        rest = np.flatnonzero(~acc)
+    if rest.size and live:
+        acc[rest] = _contains_degenerate([p[rest] for p in P], [q[rest] for q in Q], [a[rest] for a in A])
+    return acc
+
+
+def _contains_degenerate(P: Rows, Q: Rows, A: Rows) -> BoolArray:
+    """Certificates with one or two generators (needed when the cone is not full-dim).
+
+    Single k: ``|p_k| <= tol * A_k``. Pair (j, k): the combination ``|p_k| g_j + |p_j| g_k``
+    has planar part ``r`` and height ``h``; it certifies iff ``|r| <= tol * h``. Either way
+    the cone holds a vector within angle ``tol`` of the target direction.
+    """
+    tol2 = _DEGENERATE_TOL * _DEGENERATE_TOL
+    norm2 = [p * p + q * q for p, q in zip(P, Q)]
+    acc = np.zeros(P[0].shape, dtype=bool)
+    for n2, a in zip(norm2, A):
+        acc |= (a > 0) & (n2 <= tol2 * a * a)
+    nrm = [np.sqrt(n2) for n2 in norm2]
+    for j, k in itertools.combinations(range(len(P)), 2):
+        rx = nrm[k] * P[j] + nrm[j] * P[k]
+        ry = nrm[k] * Q[j] + nrm[j] * Q[k]
+        h = nrm[k] * A[j] + nrm[j] * A[k]
+        acc |= (h > 0) & (rx * rx + ry * ry <= tol2 * h * h)
+    return acc
+
+
+def _contains(X: Rows, Y: Rows, Z: Rows, t: tuple[FloatArray, FloatArray, FloatArray]) -> BoolArray:
+    P, Q, A, zero = _reduce_to_ey(X, Y, Z, t)
+    return _contains_reduced(P, Q, A, zero.shape[0]) | zero
+
+
+def _shifted_target(X: Rows, Y: Rows, Z: Rows, target: FloatArray, eps: FloatArray | float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``target - eps * sum_k g_k`` as three (b,) arrays; ``target`` is (3,) or (3, b)."""
+    out = []
+    for rows, tc in zip((X, Y, Z), target):
+        s = np.zeros_like(X[0]) if rows else np.zeros(1)
+        for r in rows:
+            s += r
+        out.append(tc - eps * s)
+    return out[0], out[1], out[2]
+
+
+def cone_contains(generators: ArrayLike, target: ArrayLike, margin: float | ArrayLike = 0.0) -> BoolArray:
+    """Exact test ``target - margin * sum_k g_k  in  cone{g_k}`` for a batch of cones.
+
+    With ``margin = eps`` this decides ``M(target) >= eps`` for the LP margin
+    ``M = max{s : sum lam_k g_k = target, lam_k >= s}``; ``margin = 0`` is plain
+    (closed) cone membership.
+
+    Parameters
+    ----------
+    generators : array_like, shape (B, K, 3)
+        Zero rows are unused slots.
+    target : array_like, shape (3,) or (B, 3)
+    margin : float or array_like, shape (B,)
+
+    Returns
+    -------
+    ndarray of bool, shape (B,)
+
+    Examples
+    --------
+    >>> g = np.array([[[0.0, 1.0, -0.5], [0.0, 1.0, 0.5]]])
+    >>> cone_contains(g, [0.0, 1.0, 0.0], 1e-7).tolist()
+    [True]
+    """
+    g = np.asarray(generators, dtype=float)
+    if g.ndim != 3 or g.shape[-1] != 3:
+        raise GeometryError(f"generators must have shape (B, K, 3), got {g.shape}")
+    B, K = g.shape[:2]
+    tgt = np.broadcast_to(np.asarray(target, dtype=float).reshape(-1, 3), (B, 3))
+    eps = np.broadcast_to(np.asarray(margin, dtype=float).reshape(-1), (B,))
+    out = np.empty(B, dtype=bool)
+    for s in range(0, B, _CHUNK):
+        sl = slice(s, min(s + _CHUNK, B))
+        X, Y, Z = ([np.ascontiguousarray(g[sl, k, c]) for k in range(K)] for c in range(3))
+        b = sl.stop - sl.start
+        if K == 0:
+            X, Y, Z = [np.zeros(b)], [np.zeros(b)], [np.zeros(b)]
+        out[sl] = _contains(X, Y, Z, _shifted_target(X, Y, Z, tgt[sl].T, eps[sl]))
+    return out
+
+
+def _check_contacts_frame(contacts: Contacts, com: ArrayLike, length_scale: float | ArrayLike) -> tuple[FloatArray, FloatArray]:
+    return _com_and_scale(com, length_scale, contacts.batch)
+
+
+_EY = np.array([0.0, 1.0, 0.0])
+
+
+def _feasible_impl(
+    contacts: Contacts, com: FloatArray, inv_L: FloatArray, margin: FloatArray, mu_override: FloatArray | None = None
+) -> BoolArray:
+    B = contacts.batch
+    out = np.empty(B, dtype=bool)
+    if contacts.count == 0:
+        out[:] = False
+        return out
+    for s in range(0, B, _CHUNK):
+        sl = slice(s, min(s + _CHUNK, B))
+        mu = None if mu_override is None else mu_override[sl]
+        X, Y, Z, pen = _generators_chunk(contacts, sl, com, inv_L, mu)
+        eps = margin[sl] if margin.shape[0] > 1 else margin[0]
+        out[sl] = _contains(X, Y, Z, _shifted_target(X, Y, Z, _EY, eps)) & ~pen
+    return out
+
+
+def feasible_batch(
+    contacts: Contacts, com: ArrayLike, length_scale: float | ArrayLike, margin: float | ArrayLike = FEASIBILITY_MARGIN
+) -> BoolArray:
+    """Fast batched quasi-static feasibility: is the weight balanced with margin?
+
+    True iff no contact is PENETRATING and the LP margin ``M`` (module docstring) is at
+    least ``margin``, decided exactly (up to floating-point conditioning) as
+    ``e_y - margin * gbar in cone{g_k}``.
+
+    Parameters
+    ----------
+    contacts : Contacts
+        (B, C) contacts with their modes.
+    com : array_like, shape (2,) or (B, 2)
+        World centre of mass (mm).
+    length_scale : float or array_like, shape (B,)
+        ``L`` (mm), normally ``ObjectModel.length_scale``.
+    margin : float or array_like, shape (B,)
+        Normalised margin threshold; default :data:`FEASIBILITY_MARGIN`.
+
+    Returns
+    -------
+    ndarray of bool, shape (B,)
+
+    Examples
+    --------
+    >>> block = Contacts.make([[-1.0, -1.0], [1.0, -1.0]], [[0.0, 1.0], [0.0, 1.0]], 0.0)
+    >>> feasible_batch(block, [0.0, 0.0], math.sqrt(2.0)).tolist()
+    [True]
+    """
+    c, il = _check_contacts_frame(contacts, com, length_scale)
+    eps = np.asarray(margin, dtype=float).reshape(-1)
+    if eps.shape[0] not in (1, contacts.batch):
+        raise GeometryError("margin must be a float or one value per instance")
+    return _feasible_impl(contacts, c, il, eps)
+
+
+def force_closure_batch(
+    contacts: Contacts, com: ArrayLike, length_scale: float | ArrayLike, margin: float = FEASIBILITY_MARGIN
+) -> BoolArray:
+    """Force closure: the contacts' cones (as given by their modes) span all of R^3.
+
+    True iff each of the six targets ``+-e_x, +-e_y, +-e_tau`` passes the fast test with
+    ``margin`` (then the cone contains a neighbourhood of 0, i.e. it is R^3). PENETRATING
+    contacts make it False. Gravity plays no part; ``com`` only fixes the moment reference
+    (force closure does not depend on it).
+
+    Returns
+    -------
+    ndarray of bool, shape (B,)
+    """
+    c, il = _check_contacts_frame(contacts, com, length_scale)
+    B = contacts.batch
+    out = np.zeros(B, dtype=bool)
+    if contacts.count == 0:
+        return out
+    targets = np.concatenate([np.eye(3), -np.eye(3)])
+    for s in range(0, B, _CHUNK):
+        sl = slice(s, min(s + _CHUNK, B))
+        X, Y, Z, pen = _generators_chunk(contacts, sl, c, il)
+        ok = ~pen
+        for e in targets:
+            idx = np.flatnonzero(ok)
+            if not idx.size:
+                break
+            Xi, Yi, Zi = ([r[idx] for r in rows] for rows in (X, Y, Z))
+            ok[idx] = _contains(Xi, Yi, Zi, _shifted_target(Xi, Yi, Zi, e, margin))
+        out[sl] = ok
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# Reference path (cvxpy + Clarabel)
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _ReferenceProblem:
+    """A parametrised LP ``max s : G lam = e_y, lam >= s, s <= cap`` for k generators."""
+
+    problem: Any
+    G: Any
+    lam: Any
+    s: Any
+
+
+@functools.lru_cache(maxsize=32)
+def _reference_problem(k: int) -> _ReferenceProblem:
+    import cvxpy as cp
+
+    G = cp.Parameter((3, k))
+    lam = cp.Variable(k)
+    s = cp.Variable()
+    prob = cp.Problem(cp.Maximize(s), [G @ lam == np.array([0.0, 1.0, 0.0]), lam >= s, s <= MARGIN_CAP])
+    return _ReferenceProblem(prob, G, lam, s)
+
+
+def _run_solver(ref: _ReferenceProblem) -> str:
+    """Solve with Clarabel and return cvxpy's status string (a seam for tests)."""
+    import cvxpy as cp
+
+    with warnings.catch_warnings():  # "solution may be inaccurate": the status says it
+        warnings.simplefilter("ignore", UserWarning)
+        ref.problem.solve(solver=cp.CLARABEL)
+    return str(ref.problem.status)
+
+
+def feasible_reference(
+    contacts: Contacts,
+    com: ArrayLike,
+    length_scale: float,
+    weight: float = 1.0,
+    margin: float = FEASIBILITY_MARGIN,
+) -> ReferenceResult:
+    """Reference feasibility of ONE instance: the margin LP solved by cvxpy with Clarabel.
+
+    Status mapping (never raises for solver outcomes):
+
+    - ``optimal``: margin ``M = s``; FEASIBLE iff ``M >= margin`` else INFEASIBLE;
+    - ``optimal_inaccurate``: FEASIBLE only if the recovered coefficients verify the
+      equilibrium (residual ``<= FEASIBILITY_MARGIN`` and least coefficient ``>= margin``),
+      else UNKNOWN;
+    - ``infeasible``: INFEASIBLE with ``M = -inf``;
+    - ``infeasible_inaccurate``, ``unbounded``, ``unbounded_inaccurate``, any other status,
+      and solver exceptions: UNKNOWN.
+
+    Three outcomes need no solve and are INFEASIBLE with ``M = -inf``: a PENETRATING
+    contact, no generator at all, and ``e_y`` outside the linear span of the generators
+    (least-squares residual above 1e-9: the equality ``G lam = e_y`` has no solution; on
+    such rank-deficient systems Clarabel tends to stall rather than certify).
+
+    Parameters
+    ----------
+    contacts : Contacts
+        A batch of exactly one instance.
+    com : array_like, shape (2,)
+    length_scale : float
+    weight : float
+        ``m g`` in newtons: only scales the returned forces.
+    margin : float
+
+    Returns
+    -------
+    ReferenceResult
+    """
+    import cvxpy as cp
+
+    if contacts.batch != 1:
+        raise GeometryError(f"feasible_reference takes one instance, got a batch of {contacts.batch}")
+    gens, pen = wrench_generators(contacts, com, length_scale)
+    C = contacts.count
+    if pen[0]:
+        return ReferenceResult(FeasibilityStatus.INFEASIBLE, -math.inf, None, "not solved: penetrating contact")
+    g = gens[0]
+    active = np.flatnonzero(np.abs(g).sum(axis=1) > 0)
+    if active.size == 0:
+        return ReferenceResult(FeasibilityStatus.INFEASIBLE, -math.inf, None, "not solved: no contact force available")
+    Ga = g[active].T
+    ey = np.array([0.0, 1.0, 0.0])
+    lsq = np.linalg.lstsq(Ga, ey, rcond=None)[0]
+    residual = float(np.linalg.norm(Ga @ lsq - ey))
+    if residual > _SPAN_TOL:
+        note = f"not solved: e_y outside the span of the generators (residual {residual:.3g})"
+        return ReferenceResult(FeasibilityStatus.INFEASIBLE, -math.inf, None, note)
+    ref = _reference_problem(int(active.size))
+    ref.G.value = Ga
+    try:
+        status = _run_solver(ref)
+    except cp.error.SolverError as exc:
+        logger.debug("reference solve failed: %s", exc)
+        return ReferenceResult(FeasibilityStatus.UNKNOWN, math.nan, None, f"solver error: {exc}")
+    except Exception as exc:  # noqa: BLE001 - the contract is: no exception escapes a solve
+        logger.warning("reference solve raised %s: %s", type(exc).__name__, exc)
+        return ReferenceResult(FeasibilityStatus.UNKNOWN, math.nan, None, f"{type(exc).__name__}: {exc}")
+
+    def forces(lam: FloatArray) -> FloatArray:
+        f = np.zeros((2 * C, 2))
+        f[active] = lam[:, None] * g[active, :2]
+        return weight * f.reshape(C, 2, 2).sum(axis=1)
+
+    lam = ref.lam.value
+    if status == cp.OPTIMAL:
+        if ref.s.value is None or lam is None:
+            return ReferenceResult(FeasibilityStatus.UNKNOWN, math.nan, None, status)
+        m = min(float(ref.s.value), MARGIN_CAP)
+        if m >= margin:
+            return ReferenceResult(FeasibilityStatus.FEASIBLE, m, forces(np.asarray(lam)), status)
+        return ReferenceResult(FeasibilityStatus.INFEASIBLE, m, None, status)
+    if status == cp.OPTIMAL_INACCURATE:
+        if lam is not None and np.all(np.isfinite(lam)):
+            lam = np.asarray(lam, dtype=float)
+            residual = float(np.max(np.abs(Ga @ lam - ey)))
+            m = min(float(lam.min()), MARGIN_CAP)
+            if residual <= _VERIFY_TOL and m >= margin:
+                return ReferenceResult(FeasibilityStatus.FEASIBLE, m, forces(lam), status)
+            logger.debug("inaccurate reference solution not verified: residual %.3g, margin %.3g", residual, m)
+        return ReferenceResult(FeasibilityStatus.UNKNOWN, math.nan, None, status)
+    if status == cp.INFEASIBLE:
+        return ReferenceResult(FeasibilityStatus.INFEASIBLE, -math.inf, None, status)
+    logger.debug("reference solve ended with status %s", status)
+    return ReferenceResult(FeasibilityStatus.UNKNOWN, math.nan, None, status)
+
+
+# --------------------------------------------------------------------------------------
+# Grasp quality
+# --------------------------------------------------------------------------------------
+
+
+def reaction_angle_batch(
+    contacts: Contacts,
+    com: ArrayLike,
+    length_scale: float | ArrayLike,
+    iterations: int = 16,
+    margin: float = FEASIBILITY_MARGIN,
+) -> FloatArray:
+    """Smallest mean friction-usage angle that still admits equilibrium, per instance.
+
+    With ``R`` the STICKING/ROLLING contacts of an instance, narrow each of their cones to
+    half-angle ``rho * atan(mu_i)`` (i.e. ``mu_i -> tan(rho * atan(mu_i))``; SLIDING edges keep
+    their ``mu``) and find the least ``rho in [0, 1]`` that stays feasible by bisection
+    (feasibility is monotone in ``rho``). The result is
+
+        alpha = rho_hi * mean_{i in R} atan(mu_i)
+
+    with ``rho_hi`` the feasible end of the final bracket (width ``2**-iterations``).
+    ``nan`` where the instance is infeasible at ``rho = 1``; ``0`` where feasible with
+    ``R`` empty or at ``rho = 0``.
+
+    Returns
+    -------
+    ndarray, shape (B,)
+        Radians.
+    """
+    c, il = _check_contacts_frame(contacts, com, length_scale)
+    eps = np.array([margin], dtype=float)
+    modes = contacts.modes
+    R = (modes == ContactMode.STICKING) | (modes == ContactMode.ROLLING)
+    half = np.arctan(contacts.mu)
+    nR = R.sum(axis=1)
+    mean_half = np.where(nR > 0, np.where(R, half, 0.0).sum(axis=1) / np.maximum(nR, 1), 0.0)
+    ok = _feasible_impl(contacts, c, il, eps)
+    out = np.full(contacts.batch, np.nan)
+    out[ok] = 0.0
+    todo = np.flatnonzero(ok & (nR > 0))
+    if todo.size == 0:
+        return out
+    sub = contacts.select(todo)
+    cs = c if c.shape[0] == 1 else c[todo]
+    ils = il if il.shape[0] == 1 else il[todo]
+    Rs, hs = R[todo], half[todo]
+
+    def feasible_at(rho: FloatArray) -> BoolArray:
+        mu = np.where(Rs, np.tan(rho[:, None] * hs), sub.mu)
+        return _feasible_impl(sub, cs, ils, eps, mu)
+
+    lo = np.zeros(todo.size)
+    hi = np.ones(todo.size)
+    hi[feasible_at(lo)] = 0.0
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        f = feasible_at(mid)
+        hi = np.where(f, mid, hi)
+        lo = np.where(f, lo, mid)
+    out[todo] = hi * mean_half[todo]
+    return out
+
+
+def grasp_quality(
+    fingers: Contacts,
+    motion: Contacts,
+    com: ArrayLike,
+    length_scale: float,
+    w1: float = 1.0,
+    w2: float = 1.0,
+    iterations: int = 16,
+) -> GraspQuality:
+    """Grasp quality ``S(g, m) = w1 * s + w2 * alpha`` (paper, "Grasp quality").
+
+    - ``s = 0`` if the finger contacts alone (full cones, i.e. taken as STICKING) are force
+      closure at every sample (:func:`force_closure_batch`), else ``1``;
+    - ``alpha`` = mean over the samples having a STICKING/ROLLING contact of
+      :func:`reaction_angle_batch` (radians).
+
+    Parameters
+    ----------
+    fingers : Contacts
+        (J, F) finger contacts at each of the J samples (modes ignored except ABSENT).
+    motion : Contacts
+        (J, C) every contact (fingers and environment) at each sample, with its mode.
+    com : array_like, shape (J, 2) or (2,)
+        World COM at each sample.
+    length_scale : float
+    w1, w2 : float
+        Weights; ``alpha`` enters in radians.
+    iterations : int
+        Bisection steps of :func:`reaction_angle_batch`.
+
+    Returns
+    -------
+    GraspQuality
+        ``admissible`` is False (and ``alpha``, ``value`` may be nan) when some sample is
+        infeasible; those samples are left out of ``alpha``.
+    """
+    fm = np.where(fingers.modes == ContactMode.ABSENT, ContactMode.ABSENT, ContactMode.STICKING)
+    closure = bool(force_closure_batch(fingers.with_modes(fm), com, length_scale).all())
+    angles = reaction_angle_batch(motion, com, length_scale, iterations=iterations)
+    admissible = bool(np.isfinite(angles).all())
+    has_R = ((motion.modes == ContactMode.STICKING) | (motion.modes == ContactMode.ROLLING)).any(axis=1)
+    use = has_R & np.isfinite(angles)
+    if use.any():
+        alpha = float(angles[use].mean())
+    else:
+        alpha = 0.0 if admissible else math.nan
+    s = 0 if closure else 1
+    return GraspQuality(w1 * s + w2 * alpha, closure, s, alpha, admissible)
+
+
+__all__: list[str] = [
+    "MARGIN_CAP",
+    "MU_ZERO",
+    "ContactMode",
+    "ContactModes",
+    "Contacts",
+    "FeasibilityStatus",
+    "GraspQuality",
+    "ModeTolerances",
+    "ReferenceResult",
+    "classify_contacts",
+    "cone_contains",
+    "feasible_batch",
+    "feasible_reference",
+    "force_closure_batch",
+    "grasp_quality",
+    "pose_displacements",
+    "reaction_angle_batch",
+    "twist_displacements",
+    "wrench_generators",
+]
