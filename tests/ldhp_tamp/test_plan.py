@@ -27,7 +27,8 @@ from ldhp_tamp.plan import (
 )
 
 #: The spec's examples: ``shared/`` sits beside the repository (``../shared`` from its root).
-EXAMPLES = Path(__file__).resolve().parents[3] / "shared" / "spec" / "examples"
+# Copies of ../shared/spec/examples (tests/ldhp_tamp/test_spec_copies.py keeps them equal).
+EXAMPLES = Path(__file__).resolve().parents[1] / "data" / "spec"
 VALID = EXAMPLES / "pick-plan.json"
 
 

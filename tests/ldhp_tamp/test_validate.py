@@ -24,7 +24,8 @@ from ldhp_tamp.scenario import Scenario, load_scenario, load_scenario_string
 from ldhp_tamp.validate import ValidationReport, format_violation, validate_plan
 
 #: The spec's examples: ``shared/`` sits beside the repository (``../shared`` from its root).
-EXAMPLES = Path(__file__).resolve().parents[3] / "shared" / "spec" / "examples"
+# Copies of ../shared/spec/examples (tests/ldhp_tamp/test_spec_copies.py keeps them equal).
+EXAMPLES = Path(__file__).resolve().parents[1] / "data" / "spec"
 BROKEN = Path(__file__).resolve().parents[1] / "data" / "plans"
 PICK_TOML = EXAMPLES / "pick.toml"
 VALID = EXAMPLES / "pick-plan.json"
