@@ -145,3 +145,22 @@ def test_a_domain_without_tip_has_no_tip_transitions(task1, domain) -> None:
     reduced = parse_domain(src[:start] + src[end:], "no-tip")
     tr = admissible_transitions(ctx, reduced.info, REGISTRY)
     assert "tip" not in tr and "push" in tr
+
+
+def test_task1_pddl_problem_has_the_eight_state_graph(task1, domain) -> None:
+    sc, ctx = task1
+    tr = admissible_transitions(ctx, domain.info, REGISTRY)
+    keep = relevant_states(ctx, tr)
+    graph = ContactGraph(tuple(s for s in ctx.states if s in keep),
+                         {a: frozenset(p for p in v if p[0] in keep and p[1] in keep) for a, v in tr.items()},
+                         ctx.start_state, ctx.goal_state, sc.start_grasp is not None, sc.goal_release)
+    problem = build_problem(domain, graph)
+    objects = sorted(o.name for o in problem.up_problem.all_objects)
+    contact = [o for o in objects if o != "s-free"]
+    # every one of the paper's 8 states is on a path from l1-e1 to the lift (tip onto a
+    # corner, tip down onto the side, ... air-move from v2-e1), plus free
+    assert len(contact) == 8 and "s-free" in objects
+    result = solve(problem, "pyperplan")
+    assert result.solved
+    assert [str(a.transition) for a in result.actions if a.transition] == [
+        "tip s-l1-e1 s-v2-e1", "air-move s-v2-e1 s-free"]
