@@ -23,6 +23,7 @@ from ldhp_tamp.primitives.registry import (
 
 # Geometric implementations, imported explicitly so that they register on REGISTRY:
 from ldhp_tamp.primitives import move_object  # noqa: E402,F401  tip, push, biplanar-slide, air-move
+from ldhp_tamp.primitives import adjust_grasp  # noqa: E402,F401  open, close, pivot, slide, flip, approach-contact
 
 __all__ = [
     "REGISTRY",

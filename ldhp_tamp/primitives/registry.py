@@ -113,12 +113,27 @@ class MoveObjectPrimitive(Protocol):
 class AdjustGraspPrimitive(Protocol):
     """What an AdjustGrasp implementation (``open``, ``pivot``, ...) provides.
 
-    Provisional: the bottom tier (grasp graph) fixes the exact signature and item type.
+    One method, ``intra_edges(context, pose, candidates)``: the intra-pose edges the
+    primitive realises at object pose ``pose`` (a :class:`~geometry.poses.Pose`) among
+    the grasps ``candidates`` (indices into ``context.grasps``, normally G_T, with row 0
+    the no-contact grasp {0, 0}), *feasibility checked*, as an
+    :class:`~ldhp_tamp.primitives.adjust_grasp.IntraEdges` value: arrays ``src``,
+    ``dst``, ``travel`` (mm) and ``switches``, and each edge's gripper motion, from which
+    :func:`~ldhp_tamp.primitives.adjust_grasp.motion_waypoints` makes the plan waypoints.
+    ``context`` is an :class:`~ldhp_tamp.primitives.adjust_grasp.AdjustContext` (world,
+    grasp set, options, caches).
+
+    The bottom tier (:mod:`ldhp_tamp.grasp_graph`) calls ``intra_edges`` once per layer.
+    An implementation that also has the lazy interface
+    (:class:`~ldhp_tamp.primitives.adjust_grasp.LazyAdjustGrasp`: ``propose`` the
+    candidate edges with their costs, ``check`` a batch of them, ``waypoints`` of one) is
+    used lazily instead: only the edges that can lie on a cheapest path are checked. The
+    six primitives of :mod:`ldhp_tamp.primitives.adjust_grasp` have both.
     """
 
-    def intra_edges(self, context: Any, pose: "Pose", grasps: Sequence[Any]) -> Iterable[Any]:
-        """The intra-pose grasp changes this primitive realises at ``pose`` among
-        ``grasps``."""
+    def intra_edges(self, context: Any, pose: "Pose", candidates: "Sequence[int] | np.ndarray") -> Any:
+        """The feasible intra-pose edges (an ``IntraEdges``) of this primitive at
+        ``pose`` among ``candidates``; ``context`` is an ``AdjustContext``."""
         ...
 
 

@@ -1,0 +1,950 @@
+"""Bottom tier: grasp-sequence planning on the layered grasp graph (paper, "Two-Tier
+Planning", and Algorithm 1's inner loop).
+
+Given an object-pose path T_0..T_n (MoveObject segments m_0..m_(n-1)), the graph has one
+layer per pose: nodes (k, g) for g in G_(T_k) (row 0, the no-contact grasp {0, 0},
+always included). Edges:
+
+- *inter-pose* (k, g) -> (k + 1, g) for g in G_(m_k), cost S_g(m_k) (the grasp quality
+  of :func:`geometry.grasps.motion_conditioned`);
+- *intra-pose* (k, g_i) -> (k, g_j), one per AdjustGrasp primitive instance the domain
+  declares (:mod:`ldhp_tamp.primitives.adjust_grasp`), cost
+  ``lambda1 * travel + lambda2 * switches``, between grasps that hold the object still
+  at T_k.
+
+The start node is (0, g_start): the scenario's start grasp in the object frame (an extra
+row of the grasp set when it is not in the set exactly), or {0, 0} when the object
+starts free of the gripper. A goal node is (n, {0, 0}) under ``goal_release``, any
+(n, g) otherwise (the last segment's G_m already guarantees the grasp holds the object).
+
+Search: the graph's edges and costs are known up front (a layer's candidate intra-pose
+edges come from each primitive's vectorised ``propose``); only the feasibility of the
+intra-pose edges (collision and quasi-static checks along the gripper motion) is costly.
+So the shortest path is found the LazySP way: the cheapest path of the *optimistic*
+graph (unchecked edges assumed feasible, edges found infeasible removed) is computed by
+vectorised Bellman-Ford rounds per layer (at most ``max_intra_depth`` AdjustGrasp edges in
+a row at one pose); its unchecked edges -- and every unchecked edge on an optimistic path
+at most ``slack`` dearer -- are checked in one vectorised batch; this repeats until the
+cheapest optimistic path is all feasible (it is then the cheapest feasible path) or there
+is none. G_T and G_m are cached per pose / per segment (its dense poses), the candidate
+edges and what was learnt of their feasibility per pose, so the dichotomy refinement of
+the TAMP loop recomputes only what the split changes. ``docs/design/grasp_graph.md`` has
+the details and measurements.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import time
+from collections import Counter, OrderedDict, defaultdict
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+
+from geometry.collision import finger_shapes
+from geometry.grasps import (
+    NO_CONTACT,
+    FingerPart,
+    GraspSet,
+    MotionCheckOptions,
+    MotionGrasps,
+    motion_conditioned,
+    pose_conditioned,
+)
+from geometry.poses import Pose, compose_batch, transform_points, wrap_angle
+from geometry.shapes import FloatArray
+from geometry.tolerances import CONTACT_TOL, EPS
+from geometry.world import GripperState, PolylineGripper, World
+from ldhp_tamp.path import Segment
+from ldhp_tamp.plan import Step, Waypoint
+from ldhp_tamp.primitives.adjust_grasp import (
+    AdjustContext,
+    AdjustGraspOptions,
+    CheckFailure,
+    IntraEdges,
+    LazyAdjustGrasp,
+    motion_waypoints,
+)
+from ldhp_tamp.primitives.registry import Binding, Family
+from ldhp_tamp.streams import PosePath
+
+__all__ = [
+    "GraspGraphOptions",
+    "GraspPlanResult",
+    "GraspPlanStatus",
+    "GraspPlanner",
+    "object_frame_grasp",
+]
+
+log = logging.getLogger(__name__)
+
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+class GraspPlanStatus(enum.Enum):
+    """Outcome of one bottom-tier solve."""
+
+    SOLVED = "solved"
+    NO_GRASP_FOR_SEGMENT = "no-grasp-for-segment"  #: some G_m is empty
+    NO_PATH = "no-path"  #: every G_m is non-empty but no grasp sequence joins them
+
+
+@dataclass(frozen=True)
+class GraspGraphOptions:
+    """Settings of the bottom tier.
+
+    Attributes
+    ----------
+    adjust : AdjustGraspOptions
+        The AdjustGrasp primitives' settings and the intra-pose cost weights.
+    motion : MotionCheckOptions
+        Settings of G_m (:func:`geometry.grasps.motion_conditioned`), with the inter-pose
+        quality weights w1, w2.
+    max_intra_depth : int
+        Most AdjustGrasp edges in a row at one pose (between two MoveObject steps, or
+        before the first / after the last): the Bellman-Ford rounds per layer.
+    slack : float
+        Each LazySP round checks, besides the cheapest optimistic path's unchecked edges,
+        every unchecked edge on an optimistic path at most this much dearer.
+    batch : int
+        Most intra-pose edges checked per LazySP round (cheapest first).
+    max_edge_checks : int
+        Budget of intra-pose edges checked per :meth:`GraspPlanner.plan` call; when it
+        runs out the search stops with NO_PATH and says so.
+    start_touch_tol : float
+        A finger of the scenario's start grasp within this distance (mm) of the object
+        touches it.
+    cache_poses : int
+        Poses whose candidate intra-pose edges (and what was learnt of them) are kept
+        between solves, least recently used dropped first (each costs ~1-30 MB).
+    """
+
+    adjust: AdjustGraspOptions = AdjustGraspOptions()
+    motion: MotionCheckOptions = MotionCheckOptions()
+    max_intra_depth: int = 3
+    slack: float = 1.0
+    batch: int = 2048
+    max_edge_checks: int = 30_000
+    start_touch_tol: float = CONTACT_TOL
+    cache_poses: int = 16
+
+
+@dataclass(frozen=True, eq=False)
+class GraspPlanResult:
+    """What :meth:`GraspPlanner.plan` returns.
+
+    Attributes
+    ----------
+    status : GraspPlanStatus
+    steps : tuple of Step
+        SOLVED: the plan's steps, AdjustGrasp steps (with their waypoints) interleaved
+        with the MoveObject steps (one per segment); empty otherwise.
+    grasps : tuple of int
+        SOLVED: g_0..g_n, the grasp carried out of each layer (the final grasp for the
+        last), indices into :attr:`GraspPlanner.grasps`.
+    cost : float
+        SOLVED: the path's cost, sum of S_g(m_k) and of the AdjustGrasp edge costs.
+    failing_segment : int or None
+        NO_GRASP_FOR_SEGMENT: the first segment whose G_m is empty; NO_PATH: the segment
+        at which forward reachability from the start node dies (the last segment when
+        the goal layer is reached but the goal condition cannot be met).
+    reason : str
+        Human-readable: which segment, which primitives, how many grasps were tried and
+        why they failed.
+    nodes : int
+        Nodes of the layered graph (sum of |G_T_k|, plus an extra start node).
+    edges : int
+        Inter-pose edges (sum of |G_m_k|) plus the intra-pose edges found feasible.
+    feasibility_checks : int
+        Quasi-static instances decided in this call (G_m and intra-pose edges).
+    time_s : float
+        Wall time of the call.
+    node_path : tuple of (int, int)
+        SOLVED: the (layer, grasp) nodes of the path.
+    layer_sizes : tuple of int
+        |G_T_k| per layer computed.
+    motion_sizes : tuple of int
+        |G_m_k| per segment computed.
+    search_rounds : int
+        LazySP rounds (optimistic shortest path, then one batch of checks).
+    intra_proposed, intra_checked, intra_feasible : int
+        Intra-pose candidate edges in the graph, checked in this call, found feasible in
+        this call (edges checked by earlier calls are not checked again).
+    by_primitive : Mapping[str, Mapping[str, int]]
+        Per bound AdjustGrasp primitive: ``candidates``, ``checked``, ``feasible`` and
+        the failures by :class:`~ldhp_tamp.primitives.adjust_grasp.CheckFailure` name.
+    timings : Mapping[str, float]
+        Seconds per stage: ``pose_sets``, ``motion_sets``, ``candidates``, ``search``,
+        ``steps``.
+    """
+
+    status: GraspPlanStatus
+    steps: tuple[Step, ...] = ()
+    grasps: tuple[int, ...] = ()
+    cost: float = math.inf
+    failing_segment: int | None = None
+    reason: str = ""
+    nodes: int = 0
+    edges: int = 0
+    feasibility_checks: int = 0
+    time_s: float = 0.0
+    node_path: tuple[tuple[int, int], ...] = ()
+    layer_sizes: tuple[int, ...] = ()
+    motion_sizes: tuple[int, ...] = ()
+    search_rounds: int = 0
+    intra_proposed: int = 0
+    intra_checked: int = 0
+    intra_feasible: int = 0
+    by_primitive: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
+    timings: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def solved(self) -> bool:
+        return self.status is GraspPlanStatus.SOLVED
+
+
+# --------------------------------------------------------------------------------------
+# The scenario's start grasp in the object frame
+# --------------------------------------------------------------------------------------
+
+
+def _segment_distance(points: FloatArray, segments: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(B, N) distances from points (B, 2) to segments (N, 2, 2) and the parameters t."""
+    a = segments[None, :, 0]
+    d = segments[None, :, 1] - a
+    rel = points[:, None, :] - a
+    t = np.clip((rel * d).sum(-1) / np.maximum((d * d).sum(-1), EPS), 0.0, 1.0)
+    return np.linalg.norm(rel - t[..., None] * d, axis=-1), t
+
+
+def object_frame_grasp(world: World, gripper: Pose, width: float, tol: float = CONTACT_TOL) -> dict[str, Any]:
+    """The columns of one grasp-set row for a gripper placed at ``gripper`` (object
+    frame) with ``width``: which fingers touch (within ``tol``), where, with which
+    normal, feature, finger part and boundary coordinate.
+
+    Two-point: the contact is the boundary point nearest to the finger centre, normal
+    from the centre towards it. Polyline: the contact region (object boundary within
+    ``tol`` of the finger polygon) is represented by the midpoint of its longest piece,
+    as :mod:`geometry.grasps` does for a pad flush on an edge; the normal is minus the
+    object edge's outward normal, or at an object vertex the outward normal of the
+    nearest finger edge.
+
+    Returns
+    -------
+    dict
+        ``gripper`` (3,), ``width``, ``contact`` (2, 2), ``normal`` (2, 2), ``feature``
+        (2,), ``part`` (2,), ``arclength`` (2,) -- NaN / -1 / NONE where not touching.
+    """
+    poly = world.object.polygon
+    n = len(poly)
+    grip = world.gripper
+    g = gripper.as_array()
+    contact = np.full((2, 2), np.nan)
+    normal = np.full((2, 2), np.nan)
+    feature = np.full(2, -1, dtype=np.int64)
+    part = np.zeros(2, dtype=np.int8)
+    fs = finger_shapes(grip, g[None], float(width))
+    vtol = 1e-6 * max(1.0, float(np.abs(poly.vertices).max()))
+    for k in range(2):
+        if fs.centres is not None:
+            c = fs.centres[0, k]
+            d, t = _segment_distance(c[None], poly.edges)
+            i = int(np.argmin(d[0]))
+            if d[0, i] - float(fs.radius) > tol:
+                continue
+            p = poly.vertices[i] + t[0, i] * poly.edge_vectors[i]
+            nv = (p - c) / max(float(np.linalg.norm(p - c)), EPS)
+            part[k] = FingerPart.CIRCLE
+        else:
+            assert fs.polygons is not None
+            fpoly = shapely.Polygon(fs.polygons[0, k])
+            if shapely.distance(fpoly, poly.shapely) > tol:
+                continue
+            region = shapely.intersection(shapely.LinearRing(poly.vertices), shapely.buffer(fpoly, tol))
+            pieces = [q for q in shapely.get_parts(region) if not q.is_empty]
+            if not pieces:
+                continue
+            best = max(pieces, key=lambda q: q.length)
+            pt = best.interpolate(0.5, normalized=True)
+            p = np.array([pt.x, pt.y])
+            fe = fs.polygons[0, k]
+            fseg = np.stack([fe, np.roll(fe, -1, axis=0)], axis=1)
+            fd, _ = _segment_distance(p[None], fseg)
+            j = int(np.argmin(fd[0]))
+            dvec = fseg[j, 1] - fseg[j, 0]
+            nv = np.array([dvec[1], -dvec[0]]) / max(float(np.linalg.norm(dvec)), EPS)  # outward (CCW)
+            assert isinstance(grip, PolylineGripper)
+            local_y = float(np.dot(p - g[:2], [-math.sin(g[2]), math.cos(g[2])]))
+            pad_lo = float(grip.finger.vertices[:, 1].min())
+            part[k] = FingerPart.TIP if abs(local_y - pad_lo) <= vtol else FingerPart.PAD
+        dv = np.linalg.norm(poly.vertices - p, axis=1)
+        if dv.min() <= vtol:
+            j = int(np.argmin(dv))
+            feature[k] = n + j
+            p = poly.vertices[j].copy()
+        else:
+            d, _ = _segment_distance(p[None], poly.edges)
+            i = int(np.argmin(d[0]))
+            feature[k] = i
+            nv = -poly.normals[i]
+        contact[k] = p
+        normal[k] = nv
+    cum = np.concatenate([[0.0], np.cumsum(poly.edge_lengths)[:-1]])
+    arc = np.full(2, np.nan)
+    for k in range(2):
+        f = int(feature[k])
+        if f >= n:
+            arc[k] = cum[f - n]
+        elif f >= 0:
+            arc[k] = cum[f] + float(np.linalg.norm(contact[k] - poly.vertices[f]))
+    return {"gripper": g, "width": float(width), "contact": contact, "normal": normal, "feature": feature,
+            "part": part, "arclength": arc}
+
+
+def _with_row(grasps: GraspSet, row: Mapping[str, Any]) -> GraspSet:
+    """The grasp set with one more row (its ``flipped`` is -1)."""
+
+    def cat(name: str, value: Any) -> np.ndarray:
+        a = getattr(grasps, name)
+        out = np.concatenate([a, np.asarray(value, dtype=a.dtype)[None]], axis=0)
+        out.setflags(write=False)
+        return out
+
+    return GraspSet(cat("gripper", row["gripper"]), cat("width", row["width"]), cat("contact", row["contact"]),
+                    cat("normal", row["normal"]), cat("feature", row["feature"]), cat("part", row["part"]),
+                    cat("arclength", row["arclength"]), cat("flipped", -1), grasps.n_object, grasps.perimeter)
+
+
+def _find_row(grasps: GraspSet, row: Mapping[str, Any], tol: float = 1e-6) -> int | None:
+    g = row["gripper"]
+    d = np.hypot(grasps.gripper[:, 0] - g[0], grasps.gripper[:, 1] - g[1])
+    da = np.abs(wrap_angle(grasps.gripper[:, 2] - g[2]))
+    ok = (d <= tol) & (da <= tol) & (np.abs(grasps.width - row["width"]) <= tol)
+    ok &= np.all((grasps.part != 0) == (np.asarray(row["part"]) != 0)[None, :], axis=1)
+    idx = np.flatnonzero(ok)
+    return int(idx[0]) if idx.size else None
+
+
+# --------------------------------------------------------------------------------------
+# The planner
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Prim:
+    """One bound AdjustGrasp primitive."""
+
+    name: str
+    impl: Any
+    lazy: bool
+
+
+@dataclass(frozen=True, eq=False)
+class _Layer:
+    """The static data of one layer of one solve."""
+
+    index: int
+    pose: FloatArray
+    key: bytes
+    members: BoolArray  # (G,) G_T (and the start node at layer 0)
+    size: int
+    state: str  # contact-state name at T_k
+    intra: BoolArray  # (G,) members that hold the object still: the only intra-pose ends
+
+
+@dataclass(frozen=True, eq=False)
+class _Cands:
+    """The candidate intra-pose edges of one primitive at one layer, sorted by source
+    (CSR: the edges of grasp g are ``starts[g]:starts[g + 1]``), with their costs and
+    what is known of their feasibility (0 unknown, 1 feasible, -1 not), kept across
+    solves."""
+
+    edges: IntraEdges
+    starts: IntArray
+    cost: FloatArray
+    valid: NDArray[np.int8]
+
+
+@dataclass(eq=False)
+class _Search:
+    """Book-keeping of one A* run."""
+
+    proposed: int = 0
+    checked: int = 0
+    feasible: int = 0
+    checks: int = 0
+    cost: float = math.inf
+    rounds: int = 0
+    stats: dict[tuple[int, str], Counter] = field(default_factory=lambda: defaultdict(Counter))
+
+
+class GraspPlanner:
+    """The bottom tier for one task: grasp sets, bound AdjustGrasp primitives, caches.
+
+    Parameters
+    ----------
+    world : World
+    grasps : GraspSet
+        The enumerated grasp set (object frame).
+    adjust : iterable of Binding
+        The AdjustGrasp primitives the domain declares
+        (``REGISTRY.bound(domain, Family.ADJUST_GRASP)``): only these make intra-pose
+        edges. An implementation with ``propose`` / ``check`` / ``waypoints``
+        (:class:`~ldhp_tamp.primitives.adjust_grasp.LazyAdjustGrasp`) is checked lazily;
+        any other only through its ``intra_edges``, once per layer.
+    start_grasp : GripperState or None
+        The scenario's start grasp (world frame); ``None``: the object starts free of
+        the gripper (start node {0, 0}).
+    goal_release : bool
+        The gripper must end out of contact (goal node {0, 0}).
+    options : GraspGraphOptions, optional
+    """
+
+    def __init__(self, world: World, grasps: GraspSet, adjust: Iterable[Binding], start_grasp: GripperState | None = None,
+                 goal_release: bool = False, options: GraspGraphOptions | None = None) -> None:
+        self.world = world
+        self.base = grasps
+        self.start_grasp = start_grasp
+        self.goal_release = bool(goal_release)
+        self.options = options or GraspGraphOptions()
+        prims = []
+        for b in adjust:
+            if b.family is not Family.ADJUST_GRASP:
+                raise ValueError(f"grasp graph: {b.name!r} is a {b.family.value} primitive, not adjust-grasp")
+            prims.append(_Prim(b.name, b.implementation, isinstance(b.implementation, LazyAdjustGrasp)))
+        self.primitives: tuple[_Prim, ...] = tuple(prims)
+        self._start_key: bytes | None = None
+        self._start_index: int = NO_CONTACT
+        self._context: AdjustContext | None = None
+        self._pose_sets: dict[bytes, IntArray] = {}
+        self._motion_sets: dict[tuple[str, bytes], MotionGrasps] = {}
+        self._cands: OrderedDict[tuple[bytes, str, bool], _Cands] = OrderedDict()
+
+    # ---- sets ------------------------------------------------------------------------
+
+    @property
+    def context(self) -> AdjustContext:
+        """The primitives' context (its grasp set is :attr:`grasps`)."""
+        if self._context is None:
+            self._context = AdjustContext(self.world, self.base, self.options.adjust)
+        return self._context
+
+    @property
+    def grasps(self) -> GraspSet:
+        """The grasp set the results index: the enumerated set, plus the start grasp's
+        row when it is not in it (fixed by the first :meth:`plan`)."""
+        return self.context.grasps
+
+    @property
+    def start_index(self) -> int:
+        """The start node's grasp (0 when the object starts free of the gripper)."""
+        return self._start_index
+
+    def _prepare(self, start_pose: FloatArray) -> None:
+        """Fix the grasp set for a path starting at ``start_pose`` (the start grasp's
+        row depends on it); the caches are reset when it changes."""
+        key = start_pose.tobytes()
+        if self._context is not None and self._start_key == key:
+            return
+        gs = self.base
+        index = NO_CONTACT
+        if self.start_grasp is not None:
+            rel = Pose.from_array(start_pose).inverse().compose(self.start_grasp.pose)
+            row = object_frame_grasp(self.world, rel, self.start_grasp.width, self.options.start_touch_tol)
+            found = _find_row(gs, row)
+            if found is None:
+                gs = _with_row(gs, row)
+                index = len(gs) - 1
+                log.debug("start grasp added as grasp %d (%d finger(s) touching)", index, int((row["part"] != 0).sum()))
+            else:
+                index = found
+        self._context = AdjustContext(self.world, gs, self.options.adjust)
+        self._start_key = key
+        self._start_index = index
+        self._pose_sets.clear()
+        self._motion_sets.clear()
+        self._cands.clear()
+
+    def pose_grasps(self, pose: FloatArray) -> IntArray:
+        """G_T at an object pose (cached by the pose's bytes)."""
+        key = np.asarray(pose, dtype=float).tobytes()
+        hit = self._pose_sets.get(key)
+        if hit is None:
+            hit = pose_conditioned(self.world, self.grasps, pose, self.options.adjust.tol)
+            self._pose_sets[key] = hit
+        return hit
+
+    def motion_grasps(self, segment: Segment) -> tuple[MotionGrasps, int, bool]:
+        """G_m of a segment (cached by its primitive and dense poses): the value, the
+        number of candidates (G_T at both ends) and whether it was computed now."""
+        key = (segment.primitive, np.asarray(segment.poses).tobytes())
+        cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]))
+        hit = self._motion_sets.get(key)
+        if hit is not None:
+            return hit, cand.size, False
+        mg = motion_conditioned(self.world, self.grasps, segment.poses, cand, self.options.motion)
+        self._motion_sets[key] = mg
+        return mg, cand.size, True
+
+    # ---- the solve ---------------------------------------------------------------------
+
+    def plan(self, path: PosePath) -> GraspPlanResult:
+        """Find the cheapest grasp sequence along ``path`` (see the module docstring).
+
+        Returns
+        -------
+        GraspPlanResult
+            SOLVED with the plan's steps, or NO_GRASP_FOR_SEGMENT / NO_PATH with the
+            failing segment and a reason. Never raises for an infeasible path.
+        """
+        t_start = time.perf_counter()
+        timings: dict[str, float] = {}
+        segments = path.segments
+        if not segments:
+            return GraspPlanResult(GraspPlanStatus.NO_PATH, reason="the pose path has no segment",
+                                   time_s=time.perf_counter() - t_start)
+        n = len(segments)
+        self._prepare(np.asarray(segments[0].poses[0], dtype=float))
+        gs = self.grasps
+        ctx = self.context
+        size = len(gs)
+
+        # G_T per layer.
+        t0 = time.perf_counter()
+        poses = [np.asarray(s.poses[0], dtype=float) for s in segments] + [np.asarray(segments[-1].poses[-1], dtype=float)]
+        states = [s.from_state.name for s in segments] + [segments[-1].to_state.name]
+        layers = []
+        for k, p in enumerate(poses):
+            members = np.zeros(size, dtype=bool)
+            members[self.pose_grasps(p)] = True
+            if k == 0:
+                members[self._start_index] = True
+            layers.append(_Layer(k, p, p.tobytes(), members, int(members.sum()), states[k], members & ctx.holds(p)))
+        timings["pose_sets"] = time.perf_counter() - t0
+
+        # G_m per segment, in order; stop at the first empty one.
+        t0 = time.perf_counter()
+        inter: list[FloatArray] = []
+        checks = 0
+        motion_sizes = []
+        for k, seg in enumerate(segments):
+            mg, n_cand, fresh = self.motion_grasps(seg)
+            if fresh:
+                checks += mg.checks
+            motion_sizes.append(len(mg))
+            if not len(mg):
+                timings["motion_sets"] = time.perf_counter() - t0
+                reason = (f"no grasp can execute segment {k} ({_describe(seg)}): none of the {n_cand} grasps "
+                          f"collision-free at both ends (of {layers[k].size} at T_{k}) is collision-free and "
+                          f"quasi-statically feasible at all {seg.poses.shape[0]} samples"
+                          + (" (check budget ran out)" if mg.truncated else ""))
+                return GraspPlanResult(GraspPlanStatus.NO_GRASP_FOR_SEGMENT, failing_segment=k, reason=reason,
+                                       nodes=sum(layer.size for layer in layers), edges=sum(motion_sizes),
+                                       feasibility_checks=checks, time_s=time.perf_counter() - t_start,
+                                       layer_sizes=tuple(layer.size for layer in layers),
+                                       motion_sizes=tuple(motion_sizes), timings=timings)
+            cost = np.full(size, np.inf)
+            cost[mg.indices] = mg.quality
+            inter.append(cost)
+        timings["motion_sets"] = time.perf_counter() - t0
+
+        # The candidate intra-pose edges of every layer.
+        t0 = time.perf_counter()
+        search = _Search()
+        cands = [[self._candidates(ctx, layer, prim, search) for prim in self.primitives] for layer in layers]
+        timings["candidates"] = time.perf_counter() - t0
+
+        # The lazy shortest-path search.
+        t0 = time.perf_counter()
+        node_path, edge_path, reach, exhausted = self._search(ctx, layers, inter, cands, search)
+        timings["search"] = time.perf_counter() - t0
+        checks += search.checks
+        nodes = sum(layer.size for layer in layers)
+        edges = int(sum(np.isfinite(c).sum() for c in inter)) + search.proposed
+        per: dict[str, Counter] = {p.name: Counter() for p in self.primitives}
+        for (_, name), st in search.stats.items():
+            per[name].update({("candidates" if key == "proposed" else key): v for key, v in st.items()})
+        common = dict(nodes=nodes, edges=edges, layer_sizes=tuple(layer.size for layer in layers),
+                      motion_sizes=tuple(motion_sizes), search_rounds=search.rounds, intra_proposed=search.proposed,
+                      intra_checked=search.checked, intra_feasible=search.feasible,
+                      by_primitive={name: dict(c) for name, c in per.items()})
+        if node_path is None:
+            reached = [int(np.isfinite(r).sum()) for r in reach]
+            k = max((i for i, c in enumerate(reached) if c), default=0)
+            failing = k if k < n else n - 1
+            reason = self._failure_reason(segments, layers, inter, reached, k, search, exhausted)
+            log.info("grasp graph: no path (%s)", reason)
+            return GraspPlanResult(GraspPlanStatus.NO_PATH, failing_segment=failing, reason=reason,
+                                   feasibility_checks=checks, time_s=time.perf_counter() - t_start,
+                                   timings=timings, **common)
+
+        # Steps.
+        t0 = time.perf_counter()
+        steps, carried = self._steps(ctx, segments, layers, cands, node_path, edge_path)
+        timings["steps"] = time.perf_counter() - t0
+        log.info("grasp graph: %d nodes, %d edges, %d intra-pose edges checked (%d feasible), %d steps",
+                 nodes, edges, search.checked, search.feasible, len(steps))
+        return GraspPlanResult(GraspPlanStatus.SOLVED, steps=tuple(steps), grasps=tuple(carried), cost=search.cost,
+                               feasibility_checks=checks, time_s=time.perf_counter() - t_start,
+                               node_path=tuple(node_path), timings=timings, **common)
+
+    # ---- candidate edges ---------------------------------------------------------------
+
+    def _candidates(self, ctx: AdjustContext, layer: _Layer, prim: _Prim, search: _Search) -> _Cands:
+        """The candidate edges of ``prim`` among the layer's intra-pose grasps (cached
+        per pose, with what was learnt of their feasibility)."""
+        key = (layer.key, prim.name, layer.index == 0)
+        hit = self._cands.get(key)
+        if hit is None:
+            pose = Pose.from_array(layer.pose)
+            rows = np.flatnonzero(layer.intra)
+            if prim.lazy:
+                edges = prim.impl.propose(ctx, pose, rows, layer.intra)
+                valid = np.zeros(len(edges), dtype=np.int8)
+            else:
+                edges = prim.impl.intra_edges(ctx, pose, rows)
+                search.checks += int(getattr(edges, "feasibility_checks", 0))
+                valid = np.ones(len(edges), dtype=np.int8)
+            order = np.argsort(np.asarray(edges.src), kind="stable")
+            edges = edges.take(order)
+            starts = np.searchsorted(np.asarray(edges.src), np.arange(len(ctx.grasps) + 1)).astype(np.int64)
+            hit = _Cands(edges, starts, np.asarray(edges.cost(self.options.adjust), dtype=float), valid)
+            self._cands[key] = hit
+            while len(self._cands) > max(1, self.options.cache_poses) * max(1, len(self.primitives)):
+                self._cands.popitem(last=False)
+        else:
+            self._cands.move_to_end(key)
+        search.proposed += len(hit.edges)
+        search.stats[(layer.index, prim.name)]["proposed"] += len(hit.edges)
+        return hit
+
+    # ---- the lazy shortest-path search -------------------------------------------------
+
+    def _search(self, ctx: AdjustContext, layers: list[_Layer], inter: list[FloatArray], cands: list[list[_Cands]],
+                search: _Search) -> tuple[list[tuple[int, int]] | None, list[Any], list[FloatArray], bool]:
+        """LazySP over the layered graph (see :func:`_optimistic`): returns (the node path
+        or None, its edges, the optimistic cost-to-come per layer -- unchecked edges
+        counted as feasible --, whether the check budget ran out)."""
+        opts = self.options
+        lg = [_LayerGraph.of(c, len(ctx.grasps)) for c in cands]
+        start = self._start_index
+        exhausted = False
+        while True:
+            search.rounds += 1
+            fwd, bwd = _optimistic(layers, inter, lg, start, self.goal_release, opts.max_intra_depth)
+            best = float(bwd[0][-1][start])
+            if not math.isfinite(best):
+                return None, [], [f[-1] for f in fwd], False
+            nodes, edges = _extract(layers, inter, lg, bwd, start, self.goal_release)
+            unknown = [e for e in edges if e is not None and lg[e[0]].valid(e[1], e[2]) == 0]
+            if not unknown:
+                search.cost = best
+                return nodes, edges, [f[-1] for f in fwd], False
+            if search.checked >= opts.max_edge_checks:
+                exhausted = True
+                break
+            picks = _select(lg, fwd, bwd, best, opts.slack, opts.batch, unknown)
+            self._check(ctx, layers, cands, picks, search)
+        return None, [], [f[-1] for f in fwd], exhausted
+
+    def _check(self, ctx: AdjustContext, layers: list[_Layer], cands: list[list[_Cands]],
+               picks: dict[tuple[int, int], IntArray], search: _Search) -> None:
+        """Check the picked candidate edges, one vectorised call per layer and primitive,
+        and record the outcome in the candidates' ``valid`` arrays."""
+        for (k, pi), idx in picks.items():
+            prim = self.primitives[pi]
+            cd = cands[k][pi]
+            res = prim.impl.check(ctx, Pose.from_array(layers[k].pose), cd.edges.take(idx))
+            cd.valid[idx] = np.where(res.ok, 1, -1)
+            search.checked += idx.size
+            search.checks += res.feasibility_checks
+            n_ok = int(np.count_nonzero(res.ok))
+            search.feasible += n_ok
+            st = search.stats[(k, prim.name)]
+            st["checked"] += idx.size
+            st["feasible"] += n_ok
+            for code, count in Counter(res.failure[~res.ok].tolist()).items():
+                st[CheckFailure(code).name.lower()] += count
+
+    # ---- results -----------------------------------------------------------------------
+
+    def _steps(self, ctx: AdjustContext, segments: Sequence[Segment], layers: list[_Layer], cands: list[list[_Cands]],
+               node_path: list[tuple[int, int]], edge_path: list[Any]) -> tuple[list[Step], list[int]]:
+        steps: list[Step] = []
+        carried: list[int] = []
+        for (k0, g0), (k1, _), payload in zip(node_path, node_path[1:], edge_path):
+            if payload is None:
+                carried.append(g0)
+                steps.append(self._move_step(ctx, segments[k0], g0))
+                continue
+            k, pi, i = payload
+            prim = self.primitives[pi]
+            edges = cands[k][pi].edges.take([i])
+            pose = Pose.from_array(layers[k].pose)
+            if prim.lazy:
+                wps = prim.impl.waypoints(ctx, pose, edges, 0)
+            else:
+                wps = motion_waypoints(ctx, pose, edges.motion, 0)
+            params_of = getattr(prim.impl, "parameters", None)
+            params = params_of(ctx, edges, 0) if params_of is not None else {
+                "from_grasp": int(edges.src[0]), "to_grasp": int(edges.dst[0])}
+            state = layers[k].state
+            steps.append(Step(prim.name, Family.ADJUST_GRASP, params, (state, state), wps))
+        carried.append(node_path[-1][1])
+        return steps, carried
+
+    def _move_step(self, ctx: AdjustContext, seg: Segment, g: int) -> Step:
+        """The MoveObject step of ``seg`` carrying grasp ``g``: the segment's dense poses
+        (refined where a finger would move more than the waypoint step), gripper T * g,
+        the grasp's contacts in the world."""
+        gs = ctx.grasps
+        poses = _dense_for_gripper(ctx, seg, g)
+        grip = compose_batch(poses, gs.gripper[g][None])
+        touch = gs.touching[g]
+        wps = []
+        for j in range(poses.shape[0]):
+            obj = Pose(float(poses[j, 0]), float(poses[j, 1]), float(poses[j, 2]))
+            pts = obj.apply(np.nan_to_num(gs.contact[g]))
+            fc = tuple((float(pts[m, 0]), float(pts[m, 1])) if touch[m] else None for m in range(2))
+            wps.append(Waypoint(obj, Pose(float(grip[j, 0]), float(grip[j, 1]), float(grip[j, 2])),
+                                float(gs.width[g]), fc))  # type: ignore[arg-type]
+        return Step(seg.primitive, Family.MOVE_OBJECT, dict(seg.parameters),
+                    (seg.from_state.name, seg.to_state.name), tuple(wps))
+
+    def _failure_reason(self, segments: Sequence[Segment], layers: list[_Layer], inter: list[FloatArray],
+                        reached: list[int], k: int, search: _Search, exhausted: bool) -> str:
+        n = len(segments)
+        layer = layers[k]
+        if k < n:
+            where = f"forward reachability dies at segment {k} ({_describe(segments[k])})"
+            need = (f"none of them is, or reaches within {self.options.max_intra_depth} feasible AdjustGrasp edges, "
+                    f"one of the {int(np.isfinite(inter[k]).sum())} grasps that can execute it")
+        else:
+            where = "the goal pose is reached but the gripper cannot release the object there"
+            need = f"none of them reaches {{0, 0}} within {self.options.max_intra_depth} feasible AdjustGrasp edges"
+        rests = self.context.layer(layer.pose).rests_alone
+        parts = []
+        for prim in self.primitives:
+            st = search.stats.get((k, prim.name), Counter())
+            fails = ", ".join(f"{v} {c}" for c, v in sorted(st.items()) if c not in ("proposed", "checked", "feasible"))
+            parts.append(f"{prim.name} {st['feasible']} feasible of {st['checked']} checked "
+                         f"({st['proposed']} candidates" + (f"; failed: {fails}" if fails else "") + ")")
+        msg = (f"no grasp sequence: {where}; {reached[k]} of the {layer.size} grasps at T_{k} are reachable from "
+               f"the start (unchecked AdjustGrasp edges counted as feasible), {need}; {int(layer.intra.sum())} grasps hold the object still at T_{k}; the object "
+               f"{'rests' if rests else 'does not rest'} on the environment alone there; AdjustGrasp edges at "
+               f"T_{k}: " + ("; ".join(parts) if parts else "none (the domain declares no AdjustGrasp primitive)"))
+        if exhausted:
+            msg += f" (search stopped: the budget of {self.options.max_edge_checks} intra-pose edge checks ran out)"
+        return msg
+
+
+@dataclass(frozen=True, eq=False)
+class _LayerGraph:
+    """The candidate intra-pose edges of one layer, all primitives concatenated, with
+    their orders by source and by destination for vectorised min-reductions."""
+
+    cands: tuple[_Cands, ...]
+    size: int
+    src: IntArray
+    dst: IntArray
+    cost: FloatArray
+    prim: IntArray
+    idx: IntArray
+    src_order: IntArray
+    src_starts: IntArray
+    dst_order: IntArray
+    dst_starts: IntArray
+
+    @staticmethod
+    def of(cands: Sequence[_Cands], size: int) -> "_LayerGraph":
+        def cat(xs: list[np.ndarray], dtype: Any) -> np.ndarray:
+            return np.concatenate(xs).astype(dtype) if xs else np.zeros(0, dtype=dtype)
+
+        src = cat([np.asarray(c.edges.src) for c in cands], np.int64)
+        dst = cat([np.asarray(c.edges.dst) for c in cands], np.int64)
+        cost = cat([c.cost for c in cands], float)
+        prim = cat([np.full(len(c.edges), i) for i, c in enumerate(cands)], np.int64)
+        idx = cat([np.arange(len(c.edges)) for c in cands], np.int64)
+        so = np.argsort(src, kind="stable")
+        do = np.argsort(dst, kind="stable")
+        keys = np.arange(size + 1)
+        return _LayerGraph(tuple(cands), size, src, dst, cost, prim, idx, so, np.searchsorted(src[so], keys),
+                           do, np.searchsorted(dst[do], keys))
+
+    def valid_all(self) -> NDArray[np.int8]:
+        """(E,) 0 unknown, 1 feasible, -1 infeasible (current knowledge)."""
+        if not self.cands:
+            return np.zeros(0, dtype=np.int8)
+        return np.concatenate([c.valid for c in self.cands])
+
+    def valid(self, prim: int, index: int) -> int:
+        return int(self.cands[prim].valid[index])
+
+
+def _min_into(order: IntArray, starts: IntArray, values: FloatArray, size: int) -> FloatArray:
+    """(size,) minimum of ``values`` per key (keys sorted by ``order``, CSR ``starts``);
+    inf where a key has no value."""
+    out = np.full(size, np.inf)
+    present = np.flatnonzero(np.diff(starts))
+    if present.size:
+        out[present] = np.minimum.reduceat(values[order], starts[present])
+    return out
+
+
+def _departure_costs(layers: list[_Layer], inter: list[FloatArray], release: bool, k: int,
+                     next_cost: FloatArray | None) -> FloatArray:
+    """Cost of leaving layer k from each grasp: S_k(g) + cost-to-go at k + 1, or 0 at the
+    goal nodes of the last layer."""
+    n = len(inter)
+    if k == n:
+        out = np.full(layers[k].members.shape[0], np.inf)
+        if release:
+            out[NO_CONTACT] = 0.0
+        else:
+            out[layers[k].members] = 0.0
+        return out
+    assert next_cost is not None
+    return np.where(layers[k].members, inter[k] + next_cost, np.inf)
+
+
+def _optimistic(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph], start: int, release: bool,
+                rounds: int) -> tuple[list[list[FloatArray]], list[list[FloatArray]]]:
+    """Optimistic cost-to-come and cost-to-go over the layered candidate graph: every
+    intra-pose candidate edge not known to be infeasible counts, with its exact cost.
+
+    Within layer k, at most ``rounds`` AdjustGrasp edges in a row (Bellman-Ford rounds,
+    each a vectorised min-reduction over the layer's edges). ``bwd[k][r][g]``: the
+    cheapest cost from (k, g) to a goal node with at most r AdjustGrasp edges before
+    leaving layer k; ``fwd[k][r][g]``: the cheapest cost from the start to (k, g) with
+    at most r AdjustGrasp edges since arriving at layer k. The cost of the cheapest path
+    is ``bwd[0][rounds][start]``; it is a lower bound of every feasible path's cost, and
+    equals it when the path's edges turn out feasible (LazySP).
+    """
+    n = len(inter)
+    size = layers[0].members.shape[0]
+    bwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
+    nxt = None
+    for k in range(n, -1, -1):
+        g = lg[k]
+        ok = g.valid_all() >= 0
+        h = [_departure_costs(layers, inter, release, k, nxt)]
+        for _ in range(rounds):
+            vals = np.where(ok, g.cost + h[-1][g.dst], np.inf)
+            h.append(np.minimum(h[-1], _min_into(g.src_order, g.src_starts, vals, size)))
+        bwd[k] = h
+        nxt = h[-1]
+    fwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
+    arrive = np.full(size, np.inf)
+    arrive[start] = 0.0
+    for k in range(n + 1):
+        g = lg[k]
+        ok = g.valid_all() >= 0
+        f = [arrive]
+        for _ in range(rounds):
+            vals = np.where(ok, f[-1][g.src] + g.cost, np.inf)
+            f.append(np.minimum(f[-1], _min_into(g.dst_order, g.dst_starts, vals, size)))
+        fwd[k] = f
+        if k < n:
+            arrive = np.where(layers[k + 1].members, f[-1] + inter[k], np.inf)
+    return fwd, bwd
+
+
+def _extract(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph], bwd: list[list[FloatArray]],
+             start: int, release: bool) -> tuple[list[tuple[int, int]], list[Any]]:
+    """The cheapest optimistic path from the start, following ``bwd``: its nodes and
+    edges (None for an inter-pose edge, (layer, primitive, candidate) for an intra-pose
+    one)."""
+    n = len(inter)
+    rounds = len(bwd[0]) - 1
+    k, g, r = 0, start, rounds
+    nodes = [(0, start)]
+    edges: list[Any] = []
+    while True:
+        h = bwd[k]
+        while r > 0 and h[r - 1][g] <= h[r][g] * (1 + 1e-12) + 1e-12:
+            r -= 1
+        if r == 0:
+            if k == n:
+                return nodes, edges
+            k += 1
+            r = rounds
+            nodes.append((k, g))
+            edges.append(None)
+            continue
+        lay = lg[k]
+        lo, hi = int(lay.src_starts[g]), int(lay.src_starts[g + 1])
+        e = lay.src_order[lo:hi]
+        ok = lay.valid_all()[e] >= 0
+        vals = np.where(ok, lay.cost[e] + h[r - 1][lay.dst[e]], np.inf)
+        j = int(e[int(np.argmin(vals))])
+        g = int(lay.dst[j])
+        r -= 1
+        nodes.append((k, g))
+        edges.append((k, int(lay.prim[j]), int(lay.idx[j])))
+
+
+def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[FloatArray]], best: float,
+            slack: float, batch: int, must: list[tuple[int, int, int]]) -> dict[tuple[int, int], IntArray]:
+    """The unchecked candidate edges to check next: those of the current cheapest path,
+    then every unchecked edge whose cheapest optimistic path through it costs at most
+    ``best + slack``, cheapest first, up to ``batch`` edges; grouped by (layer,
+    primitive)."""
+    picked: dict[tuple[int, int], set[int]] = defaultdict(set)
+    for k, pi, i in must:
+        picked[(k, pi)].add(i)
+    count = len(must)
+    rows = []
+    for k, lay in enumerate(lg):
+        if not lay.src.size:
+            continue
+        unk = lay.valid_all() == 0
+        f = fwd[k][-1][lay.src] + lay.cost + bwd[k][-1][lay.dst]
+        sel = np.flatnonzero(unk & (f <= best + slack))
+        if sel.size:
+            rows.append((f[sel], np.full(sel.size, k), lay.prim[sel], lay.idx[sel]))
+    if rows:
+        f, ks, ps, ix = (np.concatenate(x) for x in zip(*rows))
+        for j in np.argsort(f, kind="stable"):
+            if count >= batch:
+                break
+            key = (int(ks[j]), int(ps[j]))
+            if int(ix[j]) not in picked[key]:
+                picked[key].add(int(ix[j]))
+                count += 1
+    return {key: np.array(sorted(v), dtype=np.int64) for key, v in picked.items() if v}
+
+
+def _describe(seg: Segment) -> str:
+    return f"{seg.primitive} {seg.from_state.name} -> {seg.to_state.name}"
+
+
+def _dense_for_gripper(ctx: AdjustContext, seg: Segment, g: int) -> FloatArray:
+    """The segment's poses, with parameter steps subdivided where a finger centre or
+    finger vertex of grasp ``g`` would move more than ``options.step``."""
+    step = ctx.options.step
+    gs = ctx.grasps
+    pts = ctx.finger_points(gs.width[g])[0]  # (P, 2) gripper frame
+    s = np.asarray(seg.parameter_values, dtype=float)
+    poses = np.array(seg.poses, dtype=float)
+    for _ in range(8):
+        world = transform_points(compose_batch(poses, gs.gripper[g][None]), pts)  # (J+1, P, 2)
+        d = np.linalg.norm(np.diff(world, axis=0), axis=-1).max(axis=1)
+        m = np.ceil(d / step - 1e-9).astype(np.int64)
+        if not (m > 1).any():
+            return poses
+        new_s = [s[:1]]
+        for j in range(s.size - 1):
+            new_s.append(np.linspace(s[j], s[j + 1], max(1, int(m[j])) + 1)[1:])
+        s2 = np.concatenate(new_s)
+        p2 = seg.motion.poses(s2)
+        keep = np.isin(s2, s)
+        orig = np.searchsorted(s, s2[keep])
+        p2[keep] = poses[orig]
+        s, poses = s2, p2
+    return poses

@@ -1,0 +1,295 @@
+"""The AdjustGrasp primitives (``ldhp_tamp.primitives.adjust_grasp``) on hand-made cases.
+
+A 100 x 40 block lies flat on a table (the spec's pick example, goal = start so that a
+plan of AdjustGrasp steps alone has the right ends), grasped by the polyline gripper of
+the example, or by a zero-mobility two-point gripper (40 mm spacing). Every edge used
+here is turned into plan steps (an ``approach-contact`` first, so that the steps join)
+and checked by the plan validator (rules 1-7 of ``ldhp-plan/1``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from geometry.grasps import GraspOptions, enumerate_grasps, pose_conditioned
+from geometry.poses import Pose
+from ldhp_tamp.errors import InputError
+from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStats, PlanStatus, Step
+from ldhp_tamp.primitives import REGISTRY, AdjustGraspPrimitive
+from ldhp_tamp.primitives import adjust_grasp as ag
+from ldhp_tamp.scenario import Scenario, load_scenario_string
+from ldhp_tamp.validate import validate_plan
+
+BLOCK = """
+format = "ldhp-scenario/1"
+name = "{name}"
+[object]
+vertices = [[0, 0], [100, 0], [100, 40], [0, 40]]
+[[environment.solids]]
+name = "table"
+vertices = [[-300, -50], [300, -50], [300, 0], [-300, 0]]
+{extra}
+[gripper]
+{gripper}
+[friction]
+environment = 0.3
+gripper = 0.6
+[task]
+start = [0, 0, 0]
+goal = [0, 0, 0]
+"""
+POLYLINE = 'model = "polyline"\nfinger = [[0, 0], [10, 0], [10, 45], [0, 45]]\nopening = [0, 140]'
+TWO_POINT = 'model = "two-point"\nfinger_radius = 5\nspacing = [40, 40]'
+#: A wall beside the middle of the block's top, clear of it: the half turn of a flip there hits it.
+WALL = '[[environment.solids]]\nname = "wall"\nvertices = [[62, 48], [90, 48], [90, 200], [62, 200]]'
+T0 = Pose(0.0, 0.0, 0.0)
+STATE = ("l1-e3", "l1-e3")
+
+
+class Case:
+    """A scenario, its grasps (K = 10), the context and the approachable grasps at T0."""
+
+    def __init__(self, gripper: str, extra: str = "") -> None:
+        self.scenario: Scenario = load_scenario_string(BLOCK.format(name="block", extra=extra, gripper=gripper), "block")
+        self.world = self.scenario.world
+        self.grasps = enumerate_grasps(self.world, GraspOptions(samples_per_edge=10))
+        self.ctx = ag.AdjustContext(self.world, self.grasps)
+        self.gt = pose_conditioned(self.world, self.grasps, T0.as_array())
+        self.approach = ag.ApproachContact().intra_edges(self.ctx, T0, self.gt)
+
+    def step(self, prim: ag._AdjustGrasp, edges: ag.IntraEdges, i: int) -> Step:
+        return Step(prim.name, Family.ADJUST_GRASP, prim.parameters(self.ctx, edges, i), STATE,
+                    prim.waypoints(self.ctx, T0, edges, i))
+
+    def approach_to(self, g: int) -> Step:
+        i = int(np.flatnonzero(self.approach.dst == g)[0])
+        return self.step(ag.ApproachContact(), self.approach, i)
+
+    def approachable(self, rows: np.ndarray) -> np.ndarray:
+        return np.isin(rows, self.approach.dst)
+
+    def validate(self, steps: list[Step]) -> None:
+        plan = Plan(PLAN_FORMAT, self.scenario.name, self.scenario.sha256, PlanStatus.SOLVED, tuple(steps), PlanStats())
+        report = validate_plan(plan, self.scenario)
+        assert report.valid, [str(v) for v in report.violations[:5]]
+        assert report.steps_checked == len(steps)
+
+
+@pytest.fixture(scope="module")
+def poly() -> Case:
+    return Case(POLYLINE)
+
+
+@pytest.fixture(scope="module")
+def two_point() -> Case:
+    return Case(TWO_POINT)
+
+
+def finger_moves(case: Case, step: Step) -> tuple[float, float]:
+    """Largest finger-centre / finger-vertex motion and width change between waypoints."""
+    from geometry.poses import transform_points
+
+    grip = np.array([w.gripper.as_array() for w in step.waypoints])
+    width = np.array([w.width for w in step.waypoints])
+    pts = np.stack([transform_points(grip[i:i + 1], case.ctx.finger_points(width[i])[0])[0] for i in range(len(width))])
+    move = np.linalg.norm(np.diff(pts, axis=0), axis=-1).max() if len(width) > 1 else 0.0
+    return float(move), float(np.abs(np.diff(width)).max() if len(width) > 1 else 0.0)
+
+
+def test_the_six_primitives_are_registered_as_adjust_grasp_with_both_interfaces():
+    for name in ag.PRIMITIVES:
+        binding = REGISTRY.binding(name)
+        assert binding.family is Family.ADJUST_GRASP
+        assert isinstance(binding.implementation, AdjustGraspPrimitive)
+        assert isinstance(binding.implementation, ag.LazyAdjustGrasp)
+        assert binding.implementation.name == name
+
+
+def test_approach_from_above_then_close_validates(poly: Case):
+    gs = poly.grasps
+    close = ag.Close().intra_edges(poly.ctx, T0, poly.gt)
+    assert len(close) and close.checked
+    i = int(np.flatnonzero(poly.approachable(close.src))[0])
+    src, dst = int(close.src[i]), int(close.dst[i])
+    assert gs.n_touching[src] == 1 and gs.n_touching[dst] == 2 and gs.width[dst] < gs.width[src]
+    approach, closing = poly.approach_to(src), poly.step(ag.Close(), close, i)
+    poly.validate([approach, closing])
+    # The approach starts in free space above the block, touching nothing, and ends on g.
+    first = approach.waypoints[0]
+    assert first.finger_contacts == (None, None) and first.gripper.y > 40 + 45
+    assert sum(c is not None for c in approach.waypoints[-1].finger_contacts) == 1
+    # Closing keeps the touching finger's contact and ends with both fingers on the block.
+    k = int(close.finger[i])
+    kept = {w.finger_contacts[k] for w in closing.waypoints}
+    assert len(kept) == 1 and None not in kept
+    assert all(c is not None for c in closing.waypoints[-1].finger_contacts)
+    for step in (approach, closing):
+        move, dw = finger_moves(poly, step)
+        assert move <= ag.AdjustGraspOptions().step + 1e-9 and dw <= ag.AdjustGraspOptions().step + 1e-9
+
+
+def test_open_releases_the_pinch_and_ends_where_approach_starts(poly: Case):
+    close = ag.Close().intra_edges(poly.ctx, T0, poly.gt)
+    i = int(np.flatnonzero(poly.approachable(close.src))[0])
+    opening = ag.Open().intra_edges(poly.ctx, T0, poly.gt)
+    j = int(np.flatnonzero(opening.src == close.dst[i])[0])
+    approach = poly.approach_to(int(close.src[i]))
+    release = poly.step(ag.Open(), opening, j)
+    poly.validate([approach, poly.step(ag.Close(), close, i), release])
+    assert release.waypoints[-1].finger_contacts == (None, None)
+    assert release.waypoints[-1].gripper == approach.waypoints[0].gripper  # the home pose
+    assert opening.dst[j] == ag.NO_CONTACT
+
+
+def test_pivot_turns_about_the_touching_finger(poly: Case):
+    gs = poly.grasps
+    pivot = ag.Pivot().intra_edges(poly.ctx, T0, poly.gt)
+    i = int(np.flatnonzero(poly.approachable(pivot.src))[0])
+    turn = poly.step(ag.Pivot(), pivot, i)
+    poly.validate([poly.approach_to(int(pivot.src[i])), turn])
+    k = int(pivot.finger[i])
+    kept = {w.finger_contacts[k] for w in turn.waypoints}
+    assert len(kept) == 1 and None not in kept  # the pivot finger never lets go
+    dphi = math.remainder(gs.gripper[pivot.dst[i], 2] - gs.gripper[pivot.src[i], 2], 2 * math.pi)
+    assert math.remainder(math.radians(turn.parameters["angle"]) - dphi, 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+    assert len(turn.waypoints) >= 2
+
+
+def test_slide_moves_a_finger_along_the_top_edge(poly: Case):
+    gs = poly.grasps
+    slide = ag.Slide().intra_edges(poly.ctx, T0, poly.gt)
+    top = 2  # l3, the top edge of the block
+    on_top = (gs.feature[slide.src, slide.finger] == top) & poly.approachable(slide.src)
+    i = int(np.flatnonzero(on_top)[0])
+    step = poly.step(ag.Slide(), slide, i)
+    poly.validate([poly.approach_to(int(slide.src[i])), step])
+    k = int(slide.finger[i])
+    pts = np.array([w.finger_contacts[k] for w in step.waypoints])
+    assert np.allclose(pts[:, 1], 40.0)  # on the top edge all along
+    assert abs(pts[-1, 0] - pts[0, 0]) == pytest.approx(slide.travel[i])
+    assert gs.gripper[slide.src[i], 2] == gs.gripper[slide.dst[i], 2]
+
+
+def test_flip_where_clearance_allows(two_point: Case):
+    gs = two_point.grasps
+    # Finger 1 on the middle of the top, finger 2 straight above it.
+    g = int(np.flatnonzero((gs.n_touching == 1) & gs.touching[:, 0] & np.isclose(gs.contact[:, 0, 0], 45)
+                           & np.isclose(gs.contact[:, 0, 1], 40) & np.isclose(gs.gripper[:, 2], math.pi / 2))[0])
+    flip = ag.Flip().propose(two_point.ctx, T0, [g], np.isin(np.arange(len(gs)), two_point.gt))
+    assert len(flip) == 2 and set(flip.sense.tolist()) == {1, -1}
+    res = ag.Flip().check(two_point.ctx, T0, flip)
+    assert res.ok.all()
+    step = two_point.step(ag.Flip(), flip, 0)
+    two_point.validate([two_point.approach_to(g), step])
+    # The fingers have swapped onto the same contact.
+    assert step.waypoints[0].finger_contacts[0] == pytest.approx(step.waypoints[-1].finger_contacts[1])
+    assert step.waypoints[-1].finger_contacts[0] is None
+
+
+def test_flip_refused_where_the_half_turn_hits_a_wall():
+    case = Case(TWO_POINT, WALL)
+    gs = case.grasps
+    g = int(np.flatnonzero((gs.n_touching == 1) & gs.touching[:, 0] & np.isclose(gs.contact[:, 0, 0], 45)
+                           & np.isclose(gs.contact[:, 0, 1], 40) & np.isclose(gs.gripper[:, 2], math.pi / 2))[0])
+    assert g in case.gt and gs.flipped[g] in case.gt  # both ends are clear of the wall
+    flip = ag.Flip().propose(case.ctx, T0, [g], np.isin(np.arange(len(gs)), case.gt))
+    res = ag.Flip().check(case.ctx, T0, flip)
+    assert not res.ok.any()
+    assert set(res.failure.tolist()) == {ag.CheckFailure.ENVIRONMENT}
+
+
+def test_close_is_refused_for_a_zero_mobility_gripper(two_point: Case, poly: Case):
+    everything = np.ones(len(two_point.grasps), dtype=bool)
+    assert len(ag.Close().propose(two_point.ctx, T0, two_point.gt, everything)) == 0
+    assert len(ag.Close().intra_edges(two_point.ctx, T0, two_point.gt)) == 0
+    assert len(ag.Close().propose(poly.ctx, T0, poly.gt, np.ones(len(poly.grasps), bool))) > 0
+
+
+def test_approach_and_open_need_the_object_to_rest_without_the_gripper(poly: Case):
+    in_air = Pose(0.0, 100.0, 0.0)
+    assert not poly.ctx.layer(in_air).rests_alone and poly.ctx.layer(T0).rests_alone
+    gt = pose_conditioned(poly.world, poly.grasps, in_air.as_array())
+    approach = ag.ApproachContact()
+    props = approach.propose(poly.ctx, in_air, [0], np.isin(np.arange(len(poly.grasps)), gt))
+    res = approach.check(poly.ctx, in_air, props)
+    assert len(props) and not res.ok.any()
+    assert set(res.failure.tolist()) <= {ag.CheckFailure.UNSUPPORTED, ag.CheckFailure.ENVIRONMENT}
+    assert (res.failure == ag.CheckFailure.UNSUPPORTED).any()
+    assert len(ag.Open().intra_edges(poly.ctx, in_air, gt)) == 0
+
+
+@pytest.mark.parametrize("name", ["approach-contact", "open", "close", "pivot", "slide", "flip"])
+def test_waypoints_keep_the_step_and_the_grasps_at_the_ends(poly: Case, two_point: Case, name: str):
+    case = two_point if name == "flip" else poly
+    prim = REGISTRY.implementation(name)
+    edges = prim.intra_edges(case.ctx, T0, case.gt)
+    assert len(edges), name
+    gs = case.grasps
+    for i in np.linspace(0, len(edges) - 1, 4).astype(int):
+        wps = prim.waypoints(case.ctx, T0, edges, int(i))
+        step = Step(name, Family.ADJUST_GRASP, {}, STATE, wps)
+        move, dw = finger_moves(case, step)
+        assert move <= 4.0 + 1e-9 and dw <= 4.0 + 1e-9
+        assert all(w.object == T0 for w in wps)
+        for w, g in ((wps[0], int(edges.src[i])), (wps[-1], int(edges.dst[i]))):
+            declared = [c is not None for c in w.finger_contacts]
+            assert declared == gs.touching[g].tolist()
+            if g != ag.NO_CONTACT:
+                assert w.gripper.as_array() == pytest.approx(gs.gripper[g])
+                assert w.width == pytest.approx(gs.width[g])
+
+
+@pytest.mark.parametrize("name", ["close", "pivot", "slide", "flip", "approach-contact"])
+def test_the_proposed_travel_is_the_motion_travel_and_sets_the_cost(poly: Case, two_point: Case, name: str):
+    case = two_point if name == "flip" else poly
+    prim = REGISTRY.implementation(name)
+    props = prim.propose(case.ctx, T0, case.gt, np.isin(np.arange(len(case.grasps)), case.gt))
+    sub = props.take(np.arange(min(len(props), 50)))
+    motion = prim.motion(case.ctx, T0, sub)
+    assert sub.travel == pytest.approx(motion.travel(case.ctx), rel=1e-9, abs=1e-9)
+    opts = ag.AdjustGraspOptions(lambda1=0.5, lambda2=3.0)
+    assert sub.cost(opts) == pytest.approx(0.5 * sub.travel + 3.0)
+    assert (sub.switches == 1).all()
+
+
+def test_intra_edges_are_the_proposals_that_pass_the_check(poly: Case):
+    prim = ag.Pivot()
+    members = np.isin(np.arange(len(poly.grasps)), poly.gt)
+    props = prim.propose(poly.ctx, T0, poly.gt, members)
+    res = prim.check(poly.ctx, T0, props)
+    edges = prim.intra_edges(poly.ctx, T0, poly.gt)
+    assert len(edges) == int(res.ok.sum()) < len(props)
+    assert (edges.src == props.src[res.ok]).all() and (edges.dst == props.dst[res.ok]).all()
+    assert edges.failures == res.failure_counts()
+
+
+def test_check_motion_rejects_a_fixed_finger_pushed_into_the_object(two_point: Case):
+    gs = two_point.grasps
+    g = int(np.flatnonzero((gs.n_touching == 1) & gs.touching[:, 0] & np.isclose(gs.contact[:, 0, 0], 45)
+                           & np.isclose(gs.contact[:, 0, 1], 40) & np.isclose(gs.gripper[:, 2], math.pi / 2))[0])
+
+    def press(depth: float) -> ag.GripperMotion:
+        """One leg moving the gripper down by ``depth`` with finger 1 FIXED on its contact."""
+        one = lambda a: np.asarray(a, dtype=float)[None, None]  # noqa: E731
+        return ag.GripperMotion(
+            src=np.array([g]), dst=np.array([g]), start=one(gs.gripper[g]), width=one(gs.width[g]), dwidth=one(0.0),
+            centre=one(gs.gripper[g, :2]), angle=one(0.0), shift=one([0.0, -depth]),
+            role=np.array([[[ag.FingerRole.FIXED, ag.FingerRole.FREE]]], dtype=np.int8),
+            contact=one(np.nan_to_num(gs.contact[g])), normal=one(np.nan_to_num(gs.normal[g])),
+            mu=one(two_point.ctx.mu[g]), turn_normal=np.zeros((1, 1, 2), bool))
+
+    layer = two_point.ctx.layer(T0)
+    assert ag.check_motion(two_point.ctx, layer, press(0.0)).ok.all()
+    res = ag.check_motion(two_point.ctx, layer, press(10.0))
+    assert not res.ok[0] and res.failure[0] == ag.CheckFailure.OBJECT
+    assert res.samples == 4  # ceil(10 / 4) steps
+
+
+def test_options_are_checked():
+    with pytest.raises(InputError, match="lambda1"):
+        ag.AdjustGraspOptions(lambda1=-1.0)
+    with pytest.raises(InputError, match="step"):
+        ag.AdjustGraspOptions(step=0.0)

@@ -1,0 +1,295 @@
+"""The bottom tier (``ldhp_tamp.grasp_graph``): the layered grasp graph on small pose paths.
+
+The spec's pick example (a 100 x 40 block on a table, the polyline gripper) with pose
+paths built by hand from :class:`ldhp_tamp.path.Segment` and
+:func:`geometry.kinematics.translate` / ``rotate_about``; K = 10 samples per edge keeps
+every solve well under a second. Solved plans are checked by the plan validator.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from geometry.contacts import contact_state
+from geometry.grasps import GraspOptions, enumerate_grasps
+from geometry.kinematics import rotate_about, translate
+from geometry.poses import Pose
+from geometry.world import World
+from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanStatus, object_frame_grasp
+from ldhp_tamp.path import Segment
+from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStats, PlanStatus
+from ldhp_tamp.primitives import REGISTRY, ActionInfo, Binding, DomainInfo
+from ldhp_tamp.primitives.adjust_grasp import PRIMITIVES, ApproachContact, CheckFailure, CheckResult
+from ldhp_tamp.scenario import Scenario, load_scenario, load_scenario_string
+from ldhp_tamp.streams import PosePath
+from ldhp_tamp.validate import validate_plan
+
+#: A copy of ../shared/spec/examples/pick.toml (tests/ldhp_tamp/test_spec_copies.py).
+PICK_TOML = Path(__file__).resolve().parents[1] / "data" / "spec" / "pick.toml"
+K = 10
+
+PICK_LIKE = """
+format = "ldhp-scenario/1"
+name = "{name}"
+[object]
+vertices = [[0, 0], [100, 0], [100, 40], [0, 40]]
+[[environment.solids]]
+name = "table"
+vertices = [[-300, -50], [300, -50], [300, 0], [-300, 0]]
+{extra}
+[gripper]
+model = "polyline"
+finger = [[0, 0], [10, 0], [10, 45], [0, 45]]
+opening = [0, 140]
+[friction]
+environment = 0.3
+gripper = 0.6
+[task]
+start = [0, 0, 0]
+goal = {goal}
+{task}
+"""
+
+
+def bindings(without: tuple[str, ...] = ()):
+    return [REGISTRY.binding(name) for name in PRIMITIVES if name not in without]
+
+
+def scenario(name: str, goal: str, extra: str = "", task: str = "") -> Scenario:
+    return load_scenario_string(PICK_LIKE.format(name=name, goal=goal, extra=extra, task=task), name)
+
+
+def segment(world: World, name: str, motion, s1: float, **params) -> Segment:
+    start = motion.pose(0.0)
+    end = motion.pose(s1)
+    return Segment(name, contact_state(world, start), contact_state(world, end), motion, 0.0, s1, world, params)
+
+
+def lift(world: World, start: Pose, dy: float) -> Segment:
+    return segment(world, "air-move", translate(start, (0.0, 1.0 if dy > 0 else -1.0)), abs(dy), lift=dy)
+
+
+def validate(sc: Scenario, steps) -> None:
+    plan = Plan(PLAN_FORMAT, sc.name, sc.sha256, PlanStatus.SOLVED, tuple(steps), PlanStats())
+    report = validate_plan(plan, sc)
+    assert report.valid, [str(v) for v in report.violations[:5]]
+
+
+@pytest.fixture(scope="module")
+def pick() -> Scenario:
+    return load_scenario(PICK_TOML, check_planner=False)
+
+
+@pytest.fixture(scope="module")
+def pick_grasps(pick: Scenario):
+    return enumerate_grasps(pick.world, GraspOptions(samples_per_edge=K))
+
+
+def test_pick_example_approaches_closes_and_lifts_and_the_plan_validates(pick: Scenario, pick_grasps):
+    world = pick.world
+    path = PosePath((lift(world, pick.start, 100.0),))
+    planner = GraspPlanner(world, pick_grasps, bindings(), pick.start_grasp, pick.goal_release)
+    res = planner.plan(path)
+    assert res.status is GraspPlanStatus.SOLVED and res.solved, res.reason
+    names = [s.primitive for s in res.steps]
+    assert names[0] == "approach-contact" and names[-1] == "air-move"
+    assert set(names[1:-1]) <= {"close"}
+    assert [s.family for s in res.steps] == [Family.ADJUST_GRASP] * (len(names) - 1) + [Family.MOVE_OBJECT]
+    move = res.steps[-1]
+    assert len(move.waypoints) == path.segments[0].poses.shape[0]
+    assert move.contact_state == ("l1-e3", "free") and move.parameters["lift"] == 100.0
+    held = planner.grasps
+    g = res.grasps[0]
+    assert held.n_touching[g] == 2 and res.grasps == (g, g)  # a pinch, carried up
+    assert res.node_path[0] == (0, 0) and res.node_path[-1] == (1, g)
+    assert all(c is not None for c in move.waypoints[0].finger_contacts)
+    validate(pick, res.steps)
+    # The graph: one layer per pose, nodes = |G_T| summed, edges = G_m + candidates.
+    assert len(res.layer_sizes) == 2 and res.nodes == sum(res.layer_sizes)
+    assert res.edges == res.motion_sizes[0] + res.intra_proposed
+    assert 0 < res.intra_checked <= res.intra_proposed and res.feasibility_checks > 0
+    assert set(res.by_primitive) == set(PRIMITIVES)
+
+
+def test_a_second_solve_reuses_the_cached_sets_and_checks(pick: Scenario, pick_grasps):
+    world = pick.world
+    planner = GraspPlanner(world, pick_grasps, bindings(), None, False)
+    path = PosePath((lift(world, pick.start, 100.0),))
+    first = planner.plan(path)
+    again = planner.plan(PosePath((lift(world, pick.start, 100.0),)))  # a new, equal segment
+    assert first.solved and again.solved
+    assert again.feasibility_checks == 0 and again.intra_checked == 0
+    assert again.node_path == first.node_path
+
+
+def test_without_approach_contact_a_task_starting_with_the_gripper_away_has_no_path(pick: Scenario, pick_grasps):
+    world = pick.world
+    path = PosePath((lift(world, pick.start, 100.0),))
+    res = GraspPlanner(world, pick_grasps, bindings(without=("approach-contact",))).plan(path)
+    assert res.status is GraspPlanStatus.NO_PATH and not res.steps
+    assert res.failing_segment == 0
+    assert "segment 0 (air-move l1-e3 -> free)" in res.reason
+    assert "approach-contact" not in res.by_primitive
+
+
+def test_only_the_actions_the_domain_declares_make_edges(pick: Scenario, pick_grasps):
+    declared = tuple(name for name in PRIMITIVES if name != "slide")
+    domain = DomainInfo("toy", "toy.pddl", tuple(ActionInfo(name, REGISTRY.family(name)) for name in declared))
+    bound = REGISTRY.bound(domain, REGISTRY.family("slide"))
+    assert [b.name for b in bound] == list(declared)
+    world = pick.world
+    res = GraspPlanner(world, pick_grasps, bound).plan(PosePath((lift(world, pick.start, 100.0),)))
+    assert res.solved
+    assert set(res.by_primitive) == set(declared)
+    full = GraspPlanner(world, pick_grasps, bindings()).plan(PosePath((lift(world, pick.start, 100.0),)))
+    assert full.intra_proposed - res.intra_proposed == full.by_primitive["slide"]["candidates"] > 0
+
+
+def test_a_segment_no_grasp_can_hold_is_reported_with_its_index():
+    # Lift the block, carry it over a pit exactly its size, lower it in: at the bottom
+    # no finger fits beside or below it, so no grasp can execute the last segment.
+    pit = """
+[[environment.solids]]
+name = "right"
+vertices = [[250, -100], [300, -100], [300, 0], [250, 0]]
+[[environment.solids]]
+name = "floor"
+vertices = [[150, -100], [250, -100], [250, -50], [150, -50]]"""
+    text = PICK_LIKE.format(name="pit", goal="[150, -50, 0]", extra=pit, task="").replace(
+        "[[-300, -50], [300, -50], [300, 0], [-300, 0]]", "[[-300, -100], [150, -100], [150, 0], [-300, 0]]")
+    sc = load_scenario_string(text, "pit")
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=K))
+    up = lift(world, sc.start, 100.0)
+    over = segment(world, "air-move", translate(up.end, (1.0, 0.0)), 150.0)
+    down = lift(world, over.end, -150.0)
+    res = GraspPlanner(world, grasps, bindings()).plan(PosePath((up, over, down)))
+    assert res.status is GraspPlanStatus.NO_GRASP_FOR_SEGMENT
+    assert res.failing_segment == 2
+    assert res.reason.startswith("no grasp can execute segment 2 (air-move free -> ")
+    assert res.motion_sizes[0] > 0 and res.motion_sizes[1] > 0 and res.motion_sizes[2] == 0
+
+
+def test_no_path_names_the_segment_where_reachability_dies():
+    # Lift the block, then carry it under a ceiling 2 mm above its top: only pinches
+    # whose fingers hang below the block pass under it, none of which can lift it from
+    # the table, and nothing regrasps a block held in the air.
+    ceiling = '[[environment.solids]]\nname = "ceiling"\nvertices = [[150, 142], [400, 142], [400, 200], [150, 200]]'
+    sc = scenario("ceiling", "[200, 100, 0]", extra=ceiling)
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=K))
+    up = lift(world, sc.start, 100.0)
+    under = segment(world, "air-move", translate(up.end, (1.0, 0.0)), 200.0)
+    planner = GraspPlanner(world, grasps, bindings())
+    res = planner.plan(PosePath((up, under)))
+    assert res.status is GraspPlanStatus.NO_PATH, res.reason
+    assert res.motion_sizes[0] > 0 and res.motion_sizes[1] > 0
+    assert np.intersect1d(planner.motion_grasps(up)[0].indices, planner.motion_grasps(under)[0].indices).size == 0
+    assert res.failing_segment == 1
+    assert "forward reachability dies at segment 1 (air-move free -> free)" in res.reason
+    assert "does not rest" in res.reason
+
+
+def test_a_start_grasp_off_the_grid_is_added_and_released_at_the_goal():
+    # Held by its ends, pushed 30 mm along the table, released.
+    sc = scenario("held", "[30, 0, 0]", task="start_grasp = { gripper = [50, 5, 0], width = 100 }\ngoal_release = true")
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=K))
+    push = segment(world, "push", translate(sc.start, (1.0, 0.0)), 30.0, travel=30.0)
+    planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release)
+    res = planner.plan(PosePath((push,)))
+    assert res.solved, res.reason
+    start = planner.start_index
+    assert start == len(grasps) == len(planner.grasps) - 1  # an extra row
+    assert planner.grasps.n_touching[start] == 2
+    assert res.node_path == ((0, start), (1, start), (1, 0))
+    assert [s.primitive for s in res.steps] == ["push", "open"]
+    assert res.steps[0].waypoints[0].gripper.as_array() == pytest.approx([50.0, 5.0, 0.0])
+    validate(sc, res.steps)
+
+
+def test_release_in_the_air_is_refused_at_the_last_segment():
+    sc = scenario("held-up", "[0, 60, 0]", task="start_grasp = { gripper = [50, 5, 0], width = 100 }\ngoal_release = true")
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=K))
+    res = GraspPlanner(world, grasps, bindings(), sc.start_grasp, True).plan(PosePath((lift(world, sc.start, 60.0),)))
+    assert res.status is GraspPlanStatus.NO_PATH and res.failing_segment == 0
+    assert "cannot release the object" in res.reason and "does not rest" in res.reason
+
+
+def test_a_turn_in_the_air_gets_waypoints_dense_enough_for_the_fingers():
+    centre = (50.0, 80.0)
+    angle = math.radians(30.0)
+    start = Pose(0.0, 60.0, 0.0)
+    end = rotate_about(start, centre, 1).pose(angle)
+    sc = scenario("turn", "[{:.9f}, {:.9f}, {:.9f}]".format(end.x, end.y, math.degrees(end.theta)))
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=K))
+    up = lift(world, sc.start, 60.0)
+    turn = segment(world, "air-move", rotate_about(up.end, centre, 1), angle)
+    res = GraspPlanner(world, grasps, bindings()).plan(PosePath((up, turn)))
+    assert res.solved, res.reason
+    move = res.steps[-1]
+    assert len(move.waypoints) > turn.poses.shape[0]  # refined for the fingers
+    validate(sc, res.steps)
+
+
+def test_lazy_checking_finds_the_cheapest_path_that_checking_everything_finds(pick: Scenario, pick_grasps):
+    world = pick.world
+    path = PosePath((lift(world, pick.start, 100.0),))
+    lazy = GraspPlanner(world, pick_grasps, bindings(), options=GraspGraphOptions(slack=0.0, batch=1))
+    eager = GraspPlanner(world, pick_grasps, bindings(), options=GraspGraphOptions(slack=1e9, batch=10**9))
+    a, b = lazy.plan(path), eager.plan(path)
+    assert a.solved and b.solved
+    assert a.cost == pytest.approx(b.cost) and math.isfinite(a.cost)
+    assert a.intra_checked < b.intra_checked
+    assert a.search_rounds >= b.search_rounds == 2  # check everything once, then confirm
+    # The cost is the quality of the lift plus lambda1 * travel + lambda2 per AdjustGrasp edge.
+    q = lazy.motion_grasps(path.segments[0])[0]
+    s_lift = float(q.quality[np.searchsorted(q.indices, a.grasps[0])])
+    adjust = [s for s in a.steps if s.family is Family.ADJUST_GRASP]
+    assert a.cost == pytest.approx(s_lift + sum(0.01 * s.parameters["travel"] + 1.0 for s in adjust), abs=1e-3)
+
+
+class VetoApproach(ApproachContact):
+    """``approach-contact`` whose check refuses the ``veto`` cheapest edges it is asked
+    about (a small fake: the search must route around infeasible cheap edges)."""
+
+    def __init__(self, veto: set[int]) -> None:
+        self.veto = veto
+        self.asked: list[int] = []
+
+    def check(self, context, pose, edges):
+        res = super().check(context, pose, edges)
+        self.asked += edges.dst.tolist()
+        bad = np.isin(edges.dst, list(self.veto))
+        failure = np.where(bad, CheckFailure.OBJECT, res.failure).astype(np.int8)
+        return CheckResult(res.ok & ~bad, failure, res.feasibility_checks, res.samples)
+
+
+def test_the_search_routes_around_edges_found_infeasible(pick: Scenario, pick_grasps):
+    world = pick.world
+    path = PosePath((lift(world, pick.start, 100.0),))
+    free = GraspPlanner(world, pick_grasps, bindings()).plan(path)
+    first = free.grasps[0]
+    veto = VetoApproach({first})
+    binds = [Binding(b.name, b.family, veto) if b.name == "approach-contact" else b for b in bindings()]
+    res = GraspPlanner(world, pick_grasps, binds, options=GraspGraphOptions(slack=0.0, batch=1)).plan(path)
+    assert res.solved and first in veto.asked
+    assert res.node_path[1][1] != first and res.cost > free.cost
+    validate(pick, res.steps)
+
+
+def test_an_empty_path_and_object_frame_grasps(pick: Scenario, pick_grasps):
+    res = GraspPlanner(pick.world, pick_grasps, bindings()).plan(PosePath(()))
+    assert res.status is GraspPlanStatus.NO_PATH and "no segment" in res.reason
+    row = object_frame_grasp(pick.world, Pose(50.0, 5.0, 0.0), 100.0)
+    assert row["part"].tolist() == [2, 2] and row["feature"].tolist() == [3, 1]
+    assert row["contact"][:, 0].tolist() == [0.0, 100.0] and np.allclose(row["contact"][:, 1], 22.5)
+    assert row["normal"].tolist() == [[1.0, 0.0], [-1.0, 0.0]]
+    free = object_frame_grasp(pick.world, Pose(50.0, 5.0, 0.0), 120.0)
+    assert free["part"].tolist() == [0, 0] and np.isnan(free["contact"]).all()
