@@ -37,6 +37,8 @@ class _Parser(argparse.ArgumentParser):
 def cmd_check(args: argparse.Namespace) -> int:
     from ldhp_tamp.scenario import load_scenario, summarize
 
+    from ldhp_tamp.contact_graph import ContactPoseError, build_context
+
     status = EXIT_OK
     for path in args.scenarios:
         try:
@@ -45,7 +47,12 @@ def cmd_check(args: argparse.Namespace) -> int:
             print(f"error: {exc}", file=sys.stderr)
             status = EXIT_BAD_INPUT
             continue
-        print(summarize(scenario))
+        try:
+            count: int | None = len(build_context(scenario.world, scenario.start, scenario.goal).states)
+        except ContactPoseError as exc:
+            log.warning("%s: no contact-state graph: %s", path, exc)
+            count = None
+        print(summarize(scenario, contact_states=count))
     return status
 
 
@@ -74,7 +81,46 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return EXIT_NO_PLAN
 
 
-COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {"check": cmd_check, "validate": cmd_validate}
+def cmd_solve(args: argparse.Namespace) -> int:
+    """Plan for a scenario; write the plan (solved or failed) and print a summary."""
+    from pathlib import Path
+
+    from ldhp_tamp.plan import write_plan
+    from ldhp_tamp.scenario import load_scenario
+    from ldhp_tamp.tamp import SolveOptions, solve
+
+    scenario = load_scenario(args.scenario)
+    out = Path(args.out) if args.out else Path(f"{scenario.name}-plan.json")
+    options = SolveOptions(engine=args.engine, seed=args.seed,
+                           emit_pddl=Path(args.emit_pddl) if args.emit_pddl else None)
+    if options.emit_pddl is not None:
+        options.emit_pddl.mkdir(parents=True, exist_ok=True)
+    quiet = args.quiet
+
+    def progress(msg: str) -> None:
+        if not quiet:
+            print(f"[ldhp-tamp] {msg}", file=sys.stderr, flush=True)
+
+    result = solve(scenario, options, progress=progress)
+    write_plan(result.plan, out)
+    stats = result.plan.stats
+    times = ", ".join(f"{k} {v:.2f} s" for k, v in stats.time_s.items())
+    print(f"{result.status.value}: {scenario.name} -> {out}")
+    if result.solved:
+        print("  primitives: " + " -> ".join(step.primitive for step in result.plan.steps))
+        n = sum(len(step.waypoints) for step in result.plan.steps)
+        print(f"  steps: {len(result.plan.steps)}, waypoints: {n} (validated)")
+    else:
+        print(f"  reason: {result.reason}")
+    print(f"  contact states: {stats.contact_state_nodes}, grasp graph: {stats.grasp_graph_nodes} nodes, "
+          f"{stats.grasp_graph_edges} edges, top iterations: {stats.top_iterations}, "
+          f"refinements: {stats.refinements}, feasibility checks: {stats.feasibility_checks}")
+    print(f"  time: {times}")
+    return EXIT_OK if result.solved else EXIT_NO_PLAN
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "check": cmd_check, "validate": cmd_validate, "solve": cmd_solve}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -98,6 +144,18 @@ def build_parser() -> argparse.ArgumentParser:
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("plan", metavar="PLAN", help="plan JSON file (ldhp-plan/1)")
     p.add_argument("--scenario", required=True, metavar="SCENARIO", help="the scenario TOML file")
+
+    p = sub.add_parser("solve", help="plan for a scenario and write the plan JSON",
+                       description="Run the two-tier LDHP planner on a scenario. The plan is validated "
+                                   "before it is written; a failed solve writes a plan with status "
+                                   "'failed' and the reason.",
+                       epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
+    p.add_argument("--out", metavar="PLAN", help="plan JSON to write (default: <scenario name>-plan.json)")
+    p.add_argument("--engine", metavar="NAME", help="unified-planning engine (default: the scenario's, pyperplan)")
+    p.add_argument("--seed", type=int, metavar="N", help="random seed (default: the scenario's)")
+    p.add_argument("--emit-pddl", metavar="DIR", help="write the domain and one problem per top-tier iteration")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
     return parser
 
 

@@ -1,0 +1,265 @@
+"""The two-tier TAMP loop: the paper's Algorithm 1.
+
+Top tier: Steps 1-2 build the contact-state graph once (:mod:`ldhp_tamp.contact_graph`);
+each top-tier iteration solves the PDDL problem (:mod:`ldhp_tamp.symbolic`) and streams
+object-pose paths for the contact-state plan (:mod:`ldhp_tamp.streams`). Bottom tier: for
+each pose path, the layered grasp graph (:mod:`ldhp_tamp.grasp_graph`) finds a grasp
+sequence; when a ``tip`` or ``biplanar-slide`` segment has no feasible grasp it is bisected
+(up to L_max times); otherwise, or when refinement fails, the next pose path is tried, and
+when none is left the failing transitions go back to the symbolic tier as constraints
+(their static facts are removed) and the loop re-plans (up to H_max iterations).
+
+A solve never raises for an impossible task: it returns a :class:`SolveResult` with status
+``failed`` and a reason naming the tier and the cause. Bad input raises
+:class:`~ldhp_tamp.errors.InputError` before any search.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from geometry.grasps import GraspOptions, enumerate_grasps
+from ldhp_tamp import symbolic
+from ldhp_tamp.contact_graph import ContactPoseError, PlanningContext, admissible_transitions, build_context, relevant_states
+from ldhp_tamp.grasp_graph import GraspPlanner, GraspPlanStatus
+from ldhp_tamp.path import Segment
+from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
+from ldhp_tamp.primitives import REGISTRY, Family, check_against_domain
+from ldhp_tamp.primitives.registry import Transition
+from ldhp_tamp.scenario import Scenario
+from ldhp_tamp.streams import PosePath, StreamStats, pose_paths
+from ldhp_tamp.validate import validate_plan
+
+log = logging.getLogger(__name__)
+
+
+class SolveStatus(enum.Enum):
+    SOLVED = "solved"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """Knobs of one solve. ``None`` takes the scenario's ``[planner]`` value."""
+
+    engine: str | None = None
+    seed: int | None = None
+    max_top_iterations: int | None = None
+    max_refinements: int | None = None
+    samples_per_edge: int | None = None
+    emit_pddl: Path | None = None
+    pose_paths_per_plan: int = 3
+    stream_samples: int = 3
+
+
+@dataclass
+class _Clock:
+    """Wall time per tier, in seconds."""
+
+    symbolic: float = 0.0
+    streams: float = 0.0
+    grasp_graph: float = 0.0
+    setup: float = 0.0
+    start: float = field(default_factory=time.perf_counter)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"symbolic": round(self.symbolic, 4), "streams": round(self.streams, 4),
+                "grasp_graph": round(self.grasp_graph, 4), "setup": round(self.setup, 4),
+                "total": round(time.perf_counter() - self.start, 4)}
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    """What a solve returns: a plan (solved or failed) and how it went."""
+
+    status: SolveStatus
+    plan: Plan
+    reason: str = ""
+
+    @property
+    def solved(self) -> bool:
+        return self.status is SolveStatus.SOLVED
+
+
+@dataclass
+class _Counters:
+    top_iterations: int = 0
+    refinements: int = 0
+    feasibility_checks: int = 0
+    grasp_graph_nodes: int = 0
+    grasp_graph_edges: int = 0
+    contact_state_nodes: int = 0
+    pose_paths: int = 0
+
+
+def _stats(engine: str, c: _Counters, clock: _Clock) -> PlanStats:
+    return PlanStats(engine=engine, contact_state_nodes=c.contact_state_nodes,
+                     grasp_graph_nodes=c.grasp_graph_nodes, grasp_graph_edges=c.grasp_graph_edges,
+                     top_iterations=c.top_iterations, refinements=c.refinements,
+                     feasibility_checks=c.feasibility_checks, time_s=clock.as_dict(),
+                     extra={"pose_paths": c.pose_paths})
+
+
+def _failed(scenario: Scenario, engine: str, reason: str, c: _Counters, clock: _Clock) -> SolveResult:
+    log.info("failed: %s", reason)
+    plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.FAILED, (), _stats(engine, c, clock), reason)
+    return SolveResult(SolveStatus.FAILED, plan, reason)
+
+
+def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
+          progress: Callable[[str], None] | None = None) -> SolveResult:
+    """Plan for ``scenario`` with the two-tier loop (paper, Algorithm 1).
+
+    Raises
+    ------
+    InputError
+        Unusable domain or engine (checked before any search).
+    """
+    clock = _Clock()
+    c = _Counters()
+    settings = scenario.settings
+    engine = options.engine or settings.engine
+    h_max = options.max_top_iterations or settings.max_top_iterations
+    l_max = settings.max_refinements if options.max_refinements is None else options.max_refinements
+    k_samples = options.samples_per_edge or settings.samples_per_edge
+    seed = settings.seed if options.seed is None else options.seed
+    rng = np.random.default_rng(seed)
+    say = progress or (lambda _msg: None)
+
+    domain = symbolic.load_domain(settings.domain_path or settings.domain)
+    check_against_domain(domain.info, REGISTRY)
+    world = scenario.world
+
+    try:
+        ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples)
+    except ContactPoseError as exc:
+        return _failed(scenario, engine, f"top tier, step 1: {exc}", c, clock)
+    c.contact_state_nodes = len(ctx.states)
+    transitions = admissible_transitions(ctx, domain.info, REGISTRY)
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples))
+    adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
+    grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release)
+    clock.setup = time.perf_counter() - clock.start
+    say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
+        f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
+
+    forbidden: set[Transition] = set()
+    failures: list[str] = []
+    for iteration in range(1, h_max + 1):
+        c.top_iterations = iteration
+        # ---- top tier, step 2: contact-state plan -------------------------------------
+        t0 = time.perf_counter()
+        allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in forbidden)
+                   for a, pairs in transitions.items()}
+        keep = relevant_states(ctx, allowed)
+        graph = symbolic.ContactGraph(
+            states=tuple(s for s in ctx.states if s in keep),
+            transitions={a: frozenset(p for p in pairs if p[0] in keep and p[1] in keep) for a, pairs in allowed.items()},
+            start=ctx.start_state, goal=ctx.goal_state,
+            start_touching=scenario.start_grasp is not None, goal_release=scenario.goal_release)
+        problem = symbolic.build_problem(domain, graph, forbidden=frozenset(forbidden))
+        if options.emit_pddl is not None:
+            symbolic.emit_pddl(options.emit_pddl, problem, iteration)
+        sres = symbolic.solve(problem, engine)
+        clock.symbolic += time.perf_counter() - t0
+        if not sres.solved:
+            why = f"symbolic tier ({engine}): {sres.reason}"
+            if failures:
+                why += "; after geometric failures: " + "; ".join(failures[-5:])
+            return _failed(scenario, engine, why, c, clock)
+        planned = [a.transition for a in sres.actions if a.transition is not None]
+        say(f"iteration {iteration}: " + " -> ".join(str(a) for a in sres.actions))
+
+        # ---- top tier, step 3 + bottom tier --------------------------------------------
+        stream_stats = StreamStats()
+        blame: Counter[Transition] = Counter()
+        t0 = time.perf_counter()
+        paths = pose_paths(ctx, planned, domain.info, REGISTRY, rng, stream_stats)
+        tried = 0
+        while tried < options.pose_paths_per_plan:
+            ts = time.perf_counter()
+            path = next(paths, None)
+            clock.streams += time.perf_counter() - ts
+            if path is None:
+                break
+            tried += 1
+            c.pose_paths += 1
+            outcome = _bottom_tier(grasp_planner, path, l_max, c, clock)
+            if outcome.steps is not None:
+                steps = outcome.steps
+                plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, steps,
+                            _stats(engine, c, clock))
+                report = validate_plan(plan, scenario)
+                if report.valid:
+                    say(f"solved in {clock.as_dict()['total']:.2f} s")
+                    return SolveResult(SolveStatus.SOLVED, plan)
+                msg = "; ".join(v.message for v in report.violations[:3])
+                log.warning("the bottom tier's plan does not validate (%d violations: %s); "
+                            "treating it as a failure", len(report.violations), msg)
+                failures.append(f"plan failed validation ({msg})")
+                continue
+            failures.append(outcome.reason)
+            seg = outcome.segment
+            if seg is not None and 0 <= seg.step < len(planned):
+                blame[planned[seg.step]] += 1
+        _ = t0
+        # ---- feedback: forbid what failed, re-plan ------------------------------------
+        culprits = list(blame) or list(stream_stats.dead_ends)
+        if not culprits and tried == 0 and planned:
+            culprits = [planned[0]]
+        if not culprits:
+            return _failed(scenario, engine, "top tier: the contact-state plan needs no object motion "
+                           "but the bottom tier found no grasp sequence: " + "; ".join(failures[-3:]), c, clock)
+        forbidden.update(culprits)
+        if stream_stats.dead_ends:
+            failures.append("no stream sample for " + ", ".join(
+                f"{t.action} {t.from_state.name}->{t.to_state.name}" for t in stream_stats.dead_ends))
+        say(f"iteration {iteration} failed; forbidding " + ", ".join(
+            f"{t.action} {t.from_state.name}->{t.to_state.name}" for t in culprits))
+    return _failed(scenario, engine, f"no feasible plan after {h_max} top-tier iterations (H_max): "
+                   + "; ".join(failures[-5:]), c, clock)
+
+
+@dataclass(frozen=True)
+class _BottomOutcome:
+    """The bottom tier's answer for one pose path: the plan steps, or the segment to
+    blame and why."""
+
+    steps: tuple[Step, ...] | None = None
+    segment: Segment | None = None
+    reason: str = ""
+
+
+def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters,
+                 clock: _Clock) -> _BottomOutcome:
+    """Grasp planning with dichotomy refinement (Algorithm 1's inner loop)."""
+    segments = list(path.segments)
+    refinements = 0
+    while True:
+        t0 = time.perf_counter()
+        res = planner.plan(PosePath(tuple(segments)))
+        clock.grasp_graph += time.perf_counter() - t0
+        c.feasibility_checks += res.feasibility_checks
+        c.grasp_graph_nodes = res.nodes
+        c.grasp_graph_edges = res.edges
+        if res.status is GraspPlanStatus.SOLVED:
+            return _BottomOutcome(steps=tuple(res.steps))
+        k = res.failing_segment
+        seg = segments[k] if k is not None and 0 <= k < len(segments) else segments[-1]
+        if k is not None and seg.refinable and refinements < l_max:
+            segments[k:k + 1] = list(seg.split())
+            refinements += 1
+            c.refinements += 1
+            continue
+        why = res.reason if res.reason.startswith("bottom tier") else f"bottom tier: {res.reason}"
+        if refinements:
+            why += f" (after {refinements} dichotomy refinement(s))"
+        return _BottomOutcome(segment=seg, reason=why)
