@@ -1054,7 +1054,12 @@ class _EnvContacts:
 
 def _env_contacts(world: World, path: FloatArray, contact_tol: float) -> _EnvContacts:
     """Environment contacts at every sample with their modes from the object's motion:
-    sample j moves along T_j -> T_(j+1), the last sample along T_(J-1) -> T_J."""
+    sample j moves along T_j -> T_(j+1), the last sample along T_(J-1) -> T_J.
+
+    At the last sample a contact that the incoming motion drives into the environment is
+    the contact the segment ends by making (a block landing flat, pushed against a
+    wall): the object stops there, so that contact is STICKING, not penetrating.
+    """
     s = path.shape[0]
     found = [contacts.contact_points(world, Pose.from_array(p), contact_tol) for p in path]
     c = max([len(cp) for cp in found] + [0])
@@ -1069,7 +1074,11 @@ def _env_contacts(world: World, path: FloatArray, contact_tol: float) -> _EnvCon
     nxt = np.minimum(prv + 1, s - 1)
     disp, rot = mechanics.pose_displacements(pts, path[prv], path[nxt])
     modes = mechanics.classify_contacts(nrm, disp, rot[:, None], world.object.length_scale, present=live)
-    return _EnvContacts(pts, nrm, mu, np.asarray(modes.codes), np.asarray(modes.slide_dirs))
+    codes = np.array(modes.codes, dtype=np.int8, copy=True)
+    if s > 1:
+        made = codes[-1] == mechanics.ContactMode.PENETRATING
+        codes[-1, made] = mechanics.ContactMode.STICKING
+    return _EnvContacts(pts, nrm, mu, codes, np.asarray(modes.slide_dirs))
 
 
 def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray, env: _EnvContacts,

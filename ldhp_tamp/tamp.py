@@ -228,6 +228,19 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
                    + "; ".join(failures[-5:]), c, clock)
 
 
+def _refinement_target(segments: list[Segment], k: int | None) -> int | None:
+    """The segment to bisect when segment ``k`` has no feasible grasp: ``k`` itself if it
+    is a tip or a biplanar slide; otherwise the nearest such segment before it, so that
+    a regrasp can happen part-way through that motion (e.g. the grasp that tips a block
+    onto its corner cannot lift it, but a grasp reached in the middle of the tip can)."""
+    if k is None or not 0 <= k < len(segments):
+        return None
+    for j in range(k, -1, -1):
+        if segments[j].refinable:
+            return j
+    return None
+
+
 @dataclass(frozen=True)
 class _BottomOutcome:
     """The bottom tier's answer for one pose path: the plan steps, or the segment to
@@ -254,8 +267,9 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
             return _BottomOutcome(steps=tuple(res.steps))
         k = res.failing_segment
         seg = segments[k] if k is not None and 0 <= k < len(segments) else segments[-1]
-        if k is not None and seg.refinable and refinements < l_max:
-            segments[k:k + 1] = list(seg.split())
+        target = _refinement_target(segments, k)
+        if target is not None and refinements < l_max:
+            segments[target:target + 1] = list(segments[target].split())
             refinements += 1
             c.refinements += 1
             continue

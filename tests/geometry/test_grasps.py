@@ -597,3 +597,24 @@ def test_bad_options_and_fingers_are_refused() -> None:
     hook = PolylineGripper(make_polygon([[-2, 0], [10, 0], [10, 40], [0, 40]]), (0.0, 140.0))
     with pytest.raises(GeometryError, match="pad"):
         enumerate_grasps(make_world(hook), GraspOptions(samples_per_edge=4))
+
+
+def test_a_segment_that_ends_by_making_contact_can_have_grasps() -> None:
+    """Setting a pinched block down on the table: the contact made at the last sample is
+    where the object stops, not a penetration (regression: G_m of placing was empty)."""
+    from geometry.grasps import GraspOptions, enumerate_grasps, motion_conditioned, pose_conditioned
+    from geometry.kinematics import translate
+    from geometry.poses import Pose
+    from geometry.shapes import make_polygon
+    from geometry.world import Environment, Friction, PolylineGripper, Solid, World, make_object
+
+    table = Solid("table", make_polygon([[300, 0], [-300, 0], [-300, -50], [300, -50]]))
+    world = World(make_object([[0, 0], [100, 0], [100, 40], [0, 40]]), Environment((table,)),
+                  PolylineGripper(make_polygon([[0, 0], [10, 0], [10, 45], [0, 45]]), (0.0, 140.0)),
+                  Friction(0.3, 0.6))
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=10))
+    down = translate(Pose(0.0, 20.0, 0.0), (0.0, -1.0)).poses(np.linspace(0.0, 20.0, 6))
+    cand = np.intersect1d(pose_conditioned(world, grasps, down[0]), pose_conditioned(world, grasps, down[-1]))
+    gm = motion_conditioned(world, grasps, down, cand)
+    assert gm.indices.size > 0
+    assert np.all(grasps.n_touching[gm.indices] == 2)  # only pinches carry it down

@@ -1,0 +1,86 @@
+"""The TAMP loop and `ldhp-tamp solve`, end to end on small tasks."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from ldhp_tamp.cli import main
+from ldhp_tamp.plan import PlanStatus, read_plan
+from ldhp_tamp.resources import scenarios_dir
+from ldhp_tamp.scenario import load_scenario, load_scenario_string
+from ldhp_tamp.tamp import SolveOptions, SolveStatus, solve
+from ldhp_tamp.validate import validate_plan
+
+PICK = scenarios_dir() / "example_pick.toml"
+
+
+@pytest.fixture(scope="module")
+def pick_result():
+    return solve(load_scenario(PICK))
+
+
+def test_pick_example_is_solved_with_a_valid_plan(pick_result) -> None:
+    assert pick_result.status is SolveStatus.SOLVED
+    plan = pick_result.plan
+    assert validate_plan(plan, load_scenario(PICK)).valid
+    families = [s.family.value for s in plan.steps]
+    assert families[0] == "adjust-grasp" and families[-1] == "move-object"
+    assert plan.steps[-1].primitive == "air-move"
+    stats = plan.stats
+    assert stats.contact_state_nodes > 0 and stats.grasp_graph_nodes > 0 and stats.top_iterations == 1
+    assert stats.time_s["total"] >= stats.time_s["grasp_graph"] > 0
+
+
+def test_same_seed_same_plan(pick_result) -> None:
+    again = solve(load_scenario(PICK))
+    assert [s.primitive for s in again.plan.steps] == [s.primitive for s in pick_result.plan.steps]
+    assert [w for s in again.plan.steps for w in s.waypoints] == \
+        [w for s in pick_result.plan.steps for w in s.waypoints]
+
+
+def test_an_impossible_task_fails_with_a_reason_naming_the_tier() -> None:
+    # the goal is in the air beyond the end of the table (which spans x in [-300, 300]):
+    # no axis translation brings it into contact, so there is no goal contact pose
+    text = PICK.read_text().replace("goal = [0, 100, 0]", "goal = [1000, 100, 0]")
+    sc = load_scenario_string(text, "impossible", base_dir=PICK.parent)
+    result = solve(sc, SolveOptions(max_top_iterations=2))
+    assert result.status is SolveStatus.FAILED
+    assert result.plan.status is PlanStatus.FAILED and result.plan.steps == ()
+    assert result.reason.startswith("top tier, step 1") and "touches nothing" in result.reason
+
+
+def test_cli_solve_writes_a_valid_plan_and_emits_pddl(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "plan.json"
+    pddl = tmp_path / "pddl"
+    code = main(["solve", str(PICK), "--out", str(out), "--emit-pddl", str(pddl), "-q"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert text.startswith("solved:") and "primitives:" in text
+    assert read_plan(out).status is PlanStatus.SOLVED
+    assert (pddl / "domain.pddl").is_file() and (pddl / "problem-01.pddl").is_file()
+    assert main(["validate", str(out), "--scenario", str(PICK)]) == 0
+    assert not list(tmp_path.glob("*.tmp*"))
+
+
+def test_cli_solve_failed_plan_exits_1(tmp_path: Path, capsys) -> None:
+    scen = tmp_path / "impossible.toml"
+    scen.write_text(PICK.read_text().replace("goal = [0, 100, 0]", "goal = [1000, 100, 0]")
+                    + "\n[planner]\nmax_top_iterations = 1\n")
+    out = tmp_path / "plan.json"
+    assert main(["solve", str(scen), "--out", str(out), "-q"]) == 1
+    data = json.loads(out.read_text())
+    assert data["status"] == "failed" and data["steps"] == [] and data["reason"]
+    assert "reason:" in capsys.readouterr().out
+
+
+def test_cli_solve_bad_input_exits_2(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('format = "nope"\n')
+    assert main(["solve", str(bad), "--out", str(tmp_path / "p.json")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and "Traceback" not in err
+    assert not (tmp_path / "p.json").exists()
+    assert main(["solve", str(PICK), "--engine", "no-such-engine", "--out", str(tmp_path / "q.json")]) == 2
