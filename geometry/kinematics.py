@@ -107,13 +107,14 @@ def rotate_about(start: Pose, pivot: Sequence[float], sense: int) -> Motion:
     return Motion(MotionKind.ROTATE, start, int(np.sign(sense)), pivot=(float(pivot[0]), float(pivot[1])))
 
 
-def translate(start: Pose, direction: Sequence[float]) -> Motion:
-    """Straight-line translation along a (normalised) direction."""
+def translate(start: Pose, direction: Sequence[float], kept: Sequence[Contact] = ()) -> Motion:
+    """Straight-line translation along a (normalised) direction, optionally keeping point
+    contacts (a push keeps the vertices that slide on its edge)."""
     d = np.asarray(direction, dtype=float)
     n = float(np.linalg.norm(d))
     if n <= EPS:
         raise ValueError("translation direction must be non-zero")
-    return Motion(MotionKind.TRANSLATE, start, 1, direction=(float(d[0] / n), float(d[1] / n)))
+    return Motion(MotionKind.TRANSLATE, start, 1, direction=(float(d[0] / n), float(d[1] / n)), kept=tuple(kept))
 
 
 def contact_line(world: World, contact: Contact) -> tuple[float, float, float, float, float, float]:

@@ -22,7 +22,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from geometry.features import ContactState
-from geometry.kinematics import Motion, MotionKind, SweepEnd, sweep
+from geometry.kinematics import Motion, SweepEnd, sweep
 from geometry.poses import Pose, wrap_angle
 from ldhp_tamp.contact_graph import PlanningContext
 from ldhp_tamp.path import Segment

@@ -28,7 +28,7 @@ import numpy as np
 
 from geometry.grasps import GraspOptions, enumerate_grasps
 from ldhp_tamp import symbolic
-from ldhp_tamp.contact_graph import ContactPoseError, PlanningContext, admissible_transitions, build_context, relevant_states
+from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
 from ldhp_tamp.grasp_graph import GraspPlanner, GraspPlanStatus
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
@@ -181,7 +181,6 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
         # ---- top tier, step 3 + bottom tier --------------------------------------------
         stream_stats = StreamStats()
         blame: Counter[Transition] = Counter()
-        t0 = time.perf_counter()
         paths = pose_paths(ctx, planned, domain.info, REGISTRY, rng, stream_stats)
         tried = 0
         while tried < options.pose_paths_per_plan:
@@ -210,7 +209,6 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
             seg = outcome.segment
             if seg is not None and 0 <= seg.step < len(planned):
                 blame[planned[seg.step]] += 1
-        _ = t0
         # ---- feedback: forbid what failed, re-plan ------------------------------------
         culprits = list(blame) or list(stream_stats.dead_ends)
         if not culprits and tried == 0 and planned:

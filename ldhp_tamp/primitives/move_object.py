@@ -224,8 +224,7 @@ class Push(_Swept):
         for j, kept in sorted(kept_by_edge.items()):
             d = world.environment.edge_directions[j]
             for sign in (1.0, -1.0):
-                m = translate(pose, sign * d)
-                m = Motion(m.kind, m.start, 1, direction=m.direction, kept=tuple(kept))
+                m = translate(pose, sign * d, kept)
                 out.append((m, ctx.reach, {"edge": world.environment.edge_names[j],
                                            "direction": [round(float(sign * d[0]), 6), round(float(sign * d[1]), 6)]}))
         return out

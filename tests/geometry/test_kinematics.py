@@ -87,8 +87,7 @@ def test_push_to_the_wall_makes_a_new_contact(slot: World) -> None:
 
 def test_push_off_the_end_of_an_edge_loses_contact(table: World) -> None:
     v1e1 = Contact(ContactKind.VERTEX_EDGE, 0, 0)
-    m = translate(Pose(0, 0, 0), (1.0, 0.0))
-    m = type(m)(m.kind, m.start, m.sense, direction=m.direction, kept=(v1e1,))
+    m = translate(Pose(0, 0, 0), (1.0, 0.0), (v1e1,))
     sw = sweep(table, m, 1000.0)
     assert sw.end is SweepEnd.CONTACT_LOST
     assert sw.s_end == pytest.approx(500.0, abs=0.2)
