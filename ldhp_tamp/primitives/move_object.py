@@ -131,7 +131,17 @@ def _end_values(ctx: PlanningContext, sw: Sweep, from_state: ContactState, to_st
         values = [b - m, 0.5 * (a + b), a + m]
         if last and sw.end is SweepEnd.BLOCKED:
             values.insert(0, b)
-        values.append(_goal_value(ctx, sw.motion, a + m, b - m))
+        g = _goal_value(ctx, sw.motion, a + m, b - m)
+        values.append(g)
+        # Past and short of the goal value: halfway from it to each end of the interval.
+        # The in-state alignment then brings the object back to T'_g (the paper's "short
+        # motion within that state to align with T'_g"); a regrasp may only be possible
+        # beyond the goal (Task 1: the lifting pinch is entered by a pivot about a finger
+        # that holds the tipped block alone only past ~69 degrees, the goal being 60).
+        for end in (b - m, a + m):
+            v = 0.5 * (g + end)
+            if abs(v - g) * speed >= INSTANT_MM and all(abs(v - u) * speed >= INSTANT_MM for u in values):
+                values.append(v)
         return values
     return []
 

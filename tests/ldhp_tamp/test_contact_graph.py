@@ -126,6 +126,28 @@ def test_task1_streams_give_a_joined_path_to_the_goal(task1, domain) -> None:
             assert seg.step in (0, 1)
 
 
+def test_task1_tip_stream_offers_an_overshoot_aligned_back(task1, domain) -> None:
+    """Among the first three tip samples is one past the goal's 60 degrees (halfway from
+    the goal value to the end of the v2-e1 interval, ~74.6 degrees), aligned back by an
+    in-state tip. Task 1 needs it: the lifting lever pinch (l2 at ~108 mm, l4 at ~150 mm)
+    holds the block against the table only up to ~46 degrees and alone only from ~59.9,
+    and its l2 finger holds the block alone (so that a pivot can re-enter the pinch) only
+    past ~69 degrees."""
+    sc, ctx = task1
+    plan = [Transition("tip", S("l1-e1"), S("v2-e1")), Transition("air-move", S("v2-e1"), FREE)]
+    paths = list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats(), limit=3))
+    angles = [p.segments[0].parameters["angle"] for p in paths]
+    assert angles[0] == pytest.approx(60.0, abs=1e-6)
+    over = [p for p in paths if 69.0 < p.segments[0].parameters["angle"] < 85.0]
+    assert over
+    path = over[0]
+    assert path.primitives == ("tip", "tip", "air-move")
+    back = path.segments[1]
+    assert back.parameters["in_state"] and back.parameters["pivot"] == "v2"
+    assert back.parameters["angle"] == pytest.approx(path.segments[0].parameters["angle"] - 60.0, abs=1e-6)
+    check_joined(path.segments)
+
+
 def test_stream_dead_end_is_reported(task2, domain) -> None:
     _, ctx = task2
     # near the left wall, the block standing on the floor cannot tip left onto its side

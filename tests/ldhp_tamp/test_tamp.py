@@ -41,6 +41,20 @@ def test_same_seed_same_plan(pick_result) -> None:
         [w for s in pick_result.plan.steps for w in s.waypoints]
 
 
+def test_task1_zero_mobility_lift_is_solved_with_pivots() -> None:
+    # Task 1 of the paper: tip the block past the goal's 60 degrees, pivot into the lever
+    # pinch (l2 ~108 mm, l4 ~150 mm), tip back to 60 degrees and lift (regression: the
+    # tip sampled only 60, 45, 89 and 1 degrees and no pose path was refinable).
+    sc = load_scenario(scenarios_dir() / "task1_zero_mobility_lift.toml")
+    result = solve(sc)
+    assert result.status is SolveStatus.SOLVED
+    plan = result.plan
+    assert validate_plan(plan, sc).valid
+    prims = [s.primitive for s in plan.steps]
+    assert prims[-1] == "air-move" and "pivot" in prims and "tip" in prims
+    assert all(s.primitive != "open" for s in plan.steps)
+
+
 def test_an_impossible_task_fails_with_a_reason_naming_the_tier() -> None:
     # the goal is in the air beyond the end of the table (which spans x in [-300, 300]):
     # no axis translation brings it into contact, so there is no goal contact pose
