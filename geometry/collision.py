@@ -39,10 +39,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from shapely.geometry.polygon import orient
 
-from geometry.poses import transform_points
+from geometry.poses import BoolArray, transform_points
 from geometry.shapes import FloatArray, Polygon
 from geometry.tolerances import PENETRATION_TOL
 from geometry.world import Environment, Gripper, PolylineGripper, TwoPointGripper, World
@@ -69,7 +69,6 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-BoolArray = NDArray[np.bool_]
 
 
 # --------------------------------------------------------------------------------------

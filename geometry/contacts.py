@@ -43,11 +43,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from geometry.collision import eroded_environment, object_env_overlap
 from geometry.features import Contact, ContactKind, ContactState
-from geometry.poses import Pose, wrap_angle
+from geometry.poses import BoolArray, IntArray, Pose, wrap_angle
 from geometry.shapes import FloatArray
 from geometry.tolerances import CONTACT_TOL, EPS, PENETRATION_TOL
 from geometry.world import World
@@ -69,8 +69,6 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-BoolArray = NDArray[np.bool_]
-IntArray = NDArray[np.int64]
 
 
 # ======================================================================================

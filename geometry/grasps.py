@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry import collision, contacts, mechanics
 from geometry.errors import GeometryError
-from geometry.poses import Pose, compose_batch, wrap_angle
+from geometry.poses import BoolArray, IntArray, Pose, compose_batch, wrap_angle
 from geometry.shapes import FloatArray, Polygon
 from geometry.tolerances import CONTACT_TOL, EPS, GRASP_OBJECT_TOL, PENETRATION_TOL
 from geometry.world import PolylineGripper, TwoPointGripper, World
@@ -54,8 +54,6 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 
 #: Row index of the no-contact grasp ``{0, 0}`` in every :class:`GraspSet`.
 NO_CONTACT: int = 0

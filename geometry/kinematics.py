@@ -32,11 +32,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.features import Contact, ContactKind, ContactState
-from geometry.poses import Pose, wrap_angle
+from geometry.poses import FloatArray, Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL, EPS, SWEEP_TOL
 from geometry.world import World
 
-FloatArray = NDArray[np.float64]
 
 
 class MotionKind(enum.Enum):

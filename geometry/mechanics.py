@@ -61,13 +61,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import GeometryError
-from geometry.poses import Pose
+from geometry.poses import BoolArray, FloatArray, Pose
 from geometry.tolerances import FEASIBILITY_MARGIN
 
 logger = logging.getLogger(__name__)
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 ModeArray = NDArray[np.int8]
 
 #: Margins are reported saturated at this value (normalised force units). The LP margin is

@@ -17,8 +17,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import GeometryError
 from geometry.tolerances import EPS
+from geometry.poses import FloatArray
 
-FloatArray = NDArray[np.float64]
 
 
 def signed_area(vertices: FloatArray) -> float:
@@ -112,6 +112,25 @@ class Polygon:
         c, s = np.cos(theta), np.sin(theta)
         v = self.vertices
         return np.stack([c * v[:, 0] - s * v[:, 1] + x, s * v[:, 0] + c * v[:, 1] + y], axis=1)
+
+
+def segment_distances(points: ArrayLike, segments: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Distances from points (..., 2) to closed segments (S, 2, 2), and where they fall.
+
+    Returns ``(distance, t)``, both (..., S): ``t`` in [0, 1] is the parameter of the
+    closest point ``a + t (b - a)`` on each segment ``[a, b]``.
+
+    >>> d, t = segment_distances([[1.0, 2.0]], [[[0.0, 0.0], [2.0, 0.0]]])
+    >>> d.tolist(), t.tolist()
+    ([[2.0]], [[0.5]])
+    """
+    p = np.asarray(points, dtype=float)
+    seg = np.asarray(segments, dtype=float)
+    a = seg[:, 0]
+    d = seg[:, 1] - a
+    rel = p[..., None, :] - a  # (..., S, 2)
+    t = np.clip(np.einsum("...sk,sk->...s", rel, d) / np.maximum(np.einsum("sk,sk->s", d, d), EPS), 0.0, 1.0)
+    return np.linalg.norm(rel - t[..., None] * d, axis=-1), t
 
 
 def make_polygon(vertices: ArrayLike, *, what: str = "polygon") -> Polygon:

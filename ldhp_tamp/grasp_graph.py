@@ -56,8 +56,8 @@ from geometry.grasps import (
     motion_conditioned,
     pose_conditioned,
 )
-from geometry.poses import Pose, compose_batch, transform_points, wrap_angle
-from geometry.shapes import FloatArray
+from geometry.poses import BoolArray, IntArray, Pose, compose_batch, transform_points, wrap_angle
+from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS
 from geometry.world import GripperState, PolylineGripper, World
 from ldhp_tamp.path import Segment
@@ -83,8 +83,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 
 
 class GraspPlanStatus(enum.Enum):
@@ -214,15 +212,6 @@ class GraspPlanResult:
 # --------------------------------------------------------------------------------------
 
 
-def _segment_distance(points: FloatArray, segments: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """(B, N) distances from points (B, 2) to segments (N, 2, 2) and the parameters t."""
-    a = segments[None, :, 0]
-    d = segments[None, :, 1] - a
-    rel = points[:, None, :] - a
-    t = np.clip((rel * d).sum(-1) / np.maximum((d * d).sum(-1), EPS), 0.0, 1.0)
-    return np.linalg.norm(rel - t[..., None] * d, axis=-1), t
-
-
 def object_frame_grasp(world: World, gripper: Pose, width: float, tol: float = CONTACT_TOL) -> dict[str, Any]:
     """The columns of one grasp-set row for a gripper placed at ``gripper`` (object
     frame) with ``width``: which fingers touch (within ``tol``), where, with which
@@ -254,7 +243,7 @@ def object_frame_grasp(world: World, gripper: Pose, width: float, tol: float = C
     for k in range(2):
         if fs.centres is not None:
             c = fs.centres[0, k]
-            d, t = _segment_distance(c[None], poly.edges)
+            d, t = segment_distances(c[None], poly.edges)
             i = int(np.argmin(d[0]))
             if d[0, i] - float(fs.radius) > tol:
                 continue
@@ -275,7 +264,7 @@ def object_frame_grasp(world: World, gripper: Pose, width: float, tol: float = C
             p = np.array([pt.x, pt.y])
             fe = fs.polygons[0, k]
             fseg = np.stack([fe, np.roll(fe, -1, axis=0)], axis=1)
-            fd, _ = _segment_distance(p[None], fseg)
+            fd, _ = segment_distances(p[None], fseg)
             j = int(np.argmin(fd[0]))
             dvec = fseg[j, 1] - fseg[j, 0]
             nv = np.array([dvec[1], -dvec[0]]) / max(float(np.linalg.norm(dvec)), EPS)  # outward (CCW)
@@ -289,7 +278,7 @@ def object_frame_grasp(world: World, gripper: Pose, width: float, tol: float = C
             feature[k] = n + j
             p = poly.vertices[j].copy()
         else:
-            d, _ = _segment_distance(p[None], poly.edges)
+            d, _ = segment_distances(p[None], poly.edges)
             i = int(np.argmin(d[0]))
             feature[k] = i
             nv = -poly.normals[i]

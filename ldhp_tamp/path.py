@@ -15,16 +15,14 @@ from functools import cached_property
 from typing import Any, Mapping
 
 import numpy as np
-from numpy.typing import NDArray
 
 from geometry.contacts import contact_state
 from geometry.features import ContactState
 from geometry.kinematics import Motion, MotionKind, dense_parameters
-from geometry.poses import Pose
+from geometry.poses import FloatArray, Pose
 from geometry.tolerances import WAYPOINT_STEP
 from geometry.world import World
 
-FloatArray = NDArray[np.float64]
 
 #: MoveObject primitives whose segments the bottom tier may bisect (paper: dichotomy
 #: refinement of contact-sensitive segments).

@@ -36,11 +36,10 @@ from typing import Callable, Iterator
 
 import numpy as np
 import shapely
-from numpy.typing import NDArray
 
 from geometry import collision, mechanics
-from geometry.poses import transform_points, wrap_angle
-from geometry.shapes import FloatArray
+from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
+from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import MAX_WAYPOINT_STEP, VALIDATE_TOL, VALIDATE_TOL_DEG
 from geometry.world import Environment, PolylineGripper, TwoPointGripper, World
 from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStatus
@@ -50,8 +49,6 @@ __all__ = ["RULES", "ValidationReport", "Violation", "format_violation", "valida
 
 log = logging.getLogger(__name__)
 
-BoolArray = NDArray[np.bool_]
-IntArray = NDArray[np.int64]
 
 #: Short names of the spec's rules, by number.
 RULES: dict[int, str] = {
@@ -256,15 +253,6 @@ def _fmt_pose(p: FloatArray) -> str:
 # --------------------------------------------------------------------------------------
 
 
-def _segment_distance(points: FloatArray, segments: FloatArray) -> FloatArray:
-    """(..., S) distance from points (..., 2) to closed segments (S, 2, 2)."""
-    a = segments[:, 0]
-    d = segments[:, 1] - a
-    rel = points[..., None, :] - a  # (..., S, 2)
-    t = np.clip(np.einsum("...sk,sk->...s", rel, d) / np.einsum("sk,sk->s", d, d), 0.0, 1.0)
-    return np.linalg.norm(rel - t[..., None] * d, axis=-1)
-
-
 def _to_frame(poses: FloatArray, points: FloatArray) -> FloatArray:
     """World points (B, ..., 2) into the frames of poses (B, 3)."""
     shape = (-1,) + (1,) * (points.ndim - 2)
@@ -315,7 +303,7 @@ def _finger_boundary(world: World, grip: FloatArray, width: FloatArray, points: 
     dist = np.empty(points.shape[:2])
     normals, near = [], []
     for k, poly in enumerate((g.mirrored_finger, g.finger)):
-        d = _segment_distance(local[:, k], poly.edges)  # (B, E)
+        d = segment_distances(local[:, k], poly.edges)[0]  # (B, E)
         dist[:, k] = d.min(axis=1)
         normals.append(_rotate(grip, np.broadcast_to(poly.normals, (grip.shape[0],) + poly.normals.shape)))
         near.append(d <= _TOL)
@@ -371,14 +359,14 @@ def _contacts(world: World, flat: _Flat) -> _Contacts:
 
     # Object vertices on environment edges.
     verts = transform_points(flat.obj, poly.vertices)  # (B, N, 2)
-    d_ve = _segment_distance(verts, env.edges)  # (B, N, M)
+    d_ve = segment_distances(verts, env.edges)[0]  # (B, N, M)
     mu_ve = np.array([[fr.environment_mu("v", i, "e", j, n_object=n) for j in range(m)] for i in range(n)])
     add(np.repeat(verts, m, axis=1), np.tile(env.normals, (n, 1)), mu_ve.reshape(-1),
         (d_ve <= _TOL).reshape(b, n * m), [f"v{i + 1}-e{j + 1}" for i in range(n) for j in range(m)])
 
     # Environment vertices on object edges.
     ev_local = _to_frame(flat.obj, np.broadcast_to(env.vertices, (b, m, 2)))  # (B, M, 2)
-    d_ev = _segment_distance(ev_local, poly.edges)  # (B, M, N)
+    d_ev = segment_distances(ev_local, poly.edges)[0]  # (B, M, N)
     inward = _rotate(flat.obj, np.broadcast_to(-poly.normals, (b, n, 2)))  # (B, N, 2)
     mu_ev = np.array([[fr.environment_mu("l", i, "ve", j, world_edges=env.vertex_edges, n_object=n)
                        for i in range(n)] for j in range(m)])
@@ -389,7 +377,7 @@ def _contacts(world: World, flat: _Flat) -> _Contacts:
     if flat.declared.any():
         p = np.nan_to_num(flat.contacts)  # (B, 2, 2)
         q = _to_frame(flat.obj, p)  # object frame
-        d_edge = _segment_distance(q, poly.edges)  # (B, 2, N)
+        d_edge = segment_distances(q, poly.edges)[0]  # (B, 2, N)
         d_vert = np.linalg.norm(q[:, :, None, :] - poly.vertices, axis=-1)  # (B, 2, N)
         at_vertex = (d_vert <= _TOL).any(axis=-1)  # (B, 2)
         nearest_vertex = np.argmin(d_vert, axis=-1)
@@ -549,7 +537,7 @@ def _rule4(world: World, flat: _Flat, out: _Findings) -> None:
     if not flat.declared.any():
         return
     p = np.nan_to_num(flat.contacts)
-    d_obj = _segment_distance(_to_frame(flat.obj, p), world.object.polygon.edges).min(axis=-1)  # (B, 2)
+    d_obj = segment_distances(_to_frame(flat.obj, p), world.object.polygon.edges)[0].min(axis=-1)  # (B, 2)
     d_fin = _finger_boundary(world, flat.grip, flat.width, p).distance
     for k in range(2):
         worst = np.maximum(d_obj[:, k], d_fin[:, k])

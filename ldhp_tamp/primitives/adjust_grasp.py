@@ -58,8 +58,8 @@ from numpy.typing import ArrayLike, NDArray
 from geometry import collision, mechanics
 from geometry.contacts import contact_points
 from geometry.grasps import NO_CONTACT, FingerPart, GraspSet
-from geometry.poses import Pose, compose_batch, wrap_angle
-from geometry.shapes import FloatArray
+from geometry.poses import BoolArray, IntArray, Pose, compose_batch, wrap_angle
+from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS, PENETRATION_TOL, WAYPOINT_STEP
 from geometry.world import PolylineGripper, TwoPointGripper, World
 from ldhp_tamp.errors import InputError
@@ -93,8 +93,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 
 #: The six AdjustGrasp action names of the paper, in Table II order.
 PRIMITIVES: tuple[str, ...] = ("open", "close", "pivot", "slide", "flip", "approach-contact")
@@ -939,22 +937,13 @@ def sample_motion(context: AdjustContext, motion: GripperMotion) -> MotionSample
                          np.where(declared, mu, 0.0), mode, slide, free)
 
 
-def _segment_distance(points: FloatArray, segments: FloatArray) -> FloatArray:
-    """(B, N) distance from points (B, 2) to segments (N, 2, 2)."""
-    a = segments[None, :, 0]
-    d = segments[None, :, 1] - a
-    rel = points[:, None, :] - a
-    t = np.clip((rel * d).sum(-1) / np.maximum((d * d).sum(-1), EPS), 0.0, 1.0)
-    return np.linalg.norm(rel - t[..., None] * d, axis=-1)
-
-
 def _env_overlap(ctx: AdjustContext, poses: FloatArray, widths: FloatArray) -> BoolArray:
     """Gripper-environment overlap, skipping poses whose bounding disk is clear."""
     env = ctx.world.environment
     hit = np.zeros(poses.shape[0], dtype=bool)
     if env.m == 0 or poses.shape[0] == 0:
         return hit
-    dist = _segment_distance(poses[:, :2], env.edges).min(axis=1)
+    dist = segment_distances(poses[:, :2], env.edges)[0].min(axis=1)
     inside = shapely.contains_xy(env.shapely, poses[:, 0], poses[:, 1])
     maybe = np.flatnonzero(inside | (dist <= ctx.body_reach(widths) + ctx.options.tol))
     if maybe.size:
@@ -968,7 +957,7 @@ def _object_overlap(ctx: AdjustContext, poses: FloatArray, widths: FloatArray) -
     hit = np.zeros(poses.shape[0], dtype=bool)
     if poses.shape[0] == 0:
         return hit
-    dist = _segment_distance(poses[:, :2], poly.edges).min(axis=1)
+    dist = segment_distances(poses[:, :2], poly.edges)[0].min(axis=1)
     inside = shapely.contains_xy(poly.shapely, poses[:, 0], poses[:, 1])
     maybe = np.flatnonzero(inside | (dist <= ctx.body_reach(widths) + ctx.options.tol))
     if maybe.size:
@@ -988,7 +977,7 @@ def _free_touching(ctx: AdjustContext, poses: FloatArray, widths: FloatArray, fi
     sign = np.where(finger == 0, -1.0, 1.0)
     ex = np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], axis=1)
     anchor = poses[:, :2] + (sign * 0.5 * widths)[:, None] * ex
-    dist = _segment_distance(anchor, poly.edges).min(axis=1)
+    dist = segment_distances(anchor, poly.edges)[0].min(axis=1)
     inside = shapely.contains_xy(poly.shapely, anchor[:, 0], anchor[:, 1])
     tol = ctx.options.contact_tol
     grip = ctx.world.gripper
