@@ -78,17 +78,6 @@ class Pose:
         out[..., 1] = s * v[..., 0] + c * v[..., 1]
         return out
 
-    def inverse_apply(self, points: ArrayLike) -> FloatArray:
-        """World-frame points (..., 2) to body frame."""
-        p = np.asarray(points, dtype=float)
-        c, s = math.cos(self.theta), math.sin(self.theta)
-        dx = p[..., 0] - self.x
-        dy = p[..., 1] - self.y
-        out = np.empty_like(p)
-        out[..., 0] = c * dx + s * dy
-        out[..., 1] = -s * dx + c * dy
-        return out
-
     def compose(self, other: "Pose") -> "Pose":
         """``self * other``: ``other`` expressed in ``self``'s frame, returned in world."""
         x, y = self.apply(np.array([other.x, other.y]))

@@ -254,19 +254,6 @@ class Friction:
         mu = self._object_side(self.object_edges_gripper, obj_kind, obj_index, n_object)
         return self.gripper if mu is None else mu
 
-    def object_edge_gripper_mu(self, n_object: int) -> FloatArray:
-        """(N,) finger coefficient for each object edge."""
-        return np.array([self.object_edges_gripper.get(i, self.gripper) for i in range(n_object)])
-
-    def environment_edge_mu(self, env: Environment, n_object: int) -> FloatArray:
-        """(N_obj, M) coefficient for object edge i against environment edge j
-        (environment-edge override first)."""
-        out = np.empty((n_object, env.m))
-        for i in range(n_object):
-            for j in range(env.m):
-                out[i, j] = self.environment_mu("l", i, "e", j)
-        return out
-
 
 @dataclass(frozen=True, eq=False)
 class World:
