@@ -18,8 +18,6 @@ import enum
 import json
 import logging
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -27,6 +25,7 @@ from typing import Any, Mapping, NoReturn
 
 from geometry.poses import Pose
 from ldhp_tamp.errors import PlanFormatError
+from ldhp_tamp.files import write_text_atomic
 from ldhp_tamp.primitives.registry import Family  # the one vocabulary of primitive families
 
 __all__ = [
@@ -503,23 +502,6 @@ def write_plan(plan: Plan, path: str | Path) -> Path:
     """
     target = Path(path)
     text = plan_to_json(plan)  # before touching the disk: a bad value writes nothing
-    try:
-        mode = target.stat().st_mode & 0o7777
-    except FileNotFoundError:
-        mode = 0o644
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, mode)
-        os.replace(tmp, target)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    write_text_atomic(target, text)
     log.info("wrote %s (%d steps, %d waypoints)", target, len(plan.steps), sum(len(s.waypoints) for s in plan.steps))
     return target
