@@ -147,17 +147,20 @@ class PlanningContext:
 
 
 def _vertex_on_vertex(world: World, pose: Pose, tol: float = CONTACT_TOL) -> bool:
-    """Whether an object vertex sits on an environment vertex at ``pose``."""
+    """Whether an object vertex sits on a convex environment vertex at ``pose``."""
+    env = world.environment
     v = world.object_vertices(pose)
-    d = np.linalg.norm(v[:, None, :] - world.environment.vertices[None, :, :], axis=2)
+    d = np.linalg.norm(v[:, None, :] - env.vertices[None, env.vertex_convex, :], axis=2)
     return bool(np.any(d <= tol))
 
 
 def proper_states(world: World, witnesses: tuple[StateWitness, ...]) -> tuple[StateWitness, ...]:
-    """Drop the states every witness of which rests an object vertex exactly on an
+    """Drop the states every witness of which rests an object vertex exactly on a convex
     environment vertex (e.g. a corner balanced on the slot's lip corner): a measure-zero
-    configuration that no quasi-static primitive holds or passes through robustly. The
-    witnesses that do so are dropped from the states kept, too."""
+    configuration that no quasi-static primitive holds or passes through robustly. An
+    object vertex in a concave corner (the slot's floor meeting its wall) is kept: that
+    is where a biplanar slide along the floor and the wall starts or ends, and the corner
+    holds it robustly. The witnesses that do so are dropped from the states kept, too."""
     out = []
     for w in witnesses:
         keep = tuple(p for p in w.witnesses if not _vertex_on_vertex(world, p))

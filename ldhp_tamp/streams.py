@@ -22,7 +22,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from geometry.features import ContactState
-from geometry.kinematics import Motion, SweepEnd, sweep
+from geometry.kinematics import Motion, MotionKind, SweepEnd, sweep
 from geometry.poses import Pose, wrap_angle
 from ldhp_tamp.contact_graph import PlanningContext
 from ldhp_tamp.path import Segment
@@ -32,6 +32,12 @@ log = logging.getLogger(__name__)
 
 #: Poses closer than this (mm, and mm at the object's radius for the angle) coincide.
 ALIGN_TOL_MM = 0.05
+#: Where along an in-state stretch a repositioning motion may end (fractions of it).
+REPOSITION_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
+#: Repositioning motions shorter than this (mm of vertex motion) are not worth a step.
+REPOSITION_MIN_MM = 5.0
+#: Distance (mm of vertex motion) a repositioning motion keeps from the state's boundary.
+REPOSITION_MARGIN_MM = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +65,7 @@ class StreamStats:
     expansions: int = 0
     dead_ends: Counter = field(default_factory=Counter)  # Transition -> count
     alignment_failures: Counter = field(default_factory=Counter)  # state -> count
+    repositions: int = 0  # in-state repositioning motions tried
 
 
 def _close(a: Pose, b: Pose, radius: float) -> bool:
@@ -133,6 +140,64 @@ def _seg(name: str, state: ContactState, motion: Motion, s_end: float, ctx: Plan
     return Segment(name, state, state, motion, 0.0, s_end, ctx.world, p)
 
 
+def reposition(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry, state: ContactState,
+               pose: Pose, fractions: Sequence[float] = REPOSITION_FRACTIONS) -> list[Segment]:
+    """In-state motions from ``pose``: for every motion family of every MoveObject
+    primitive the domain declares, the stretch over which the object stays in ``state``,
+    sampled at ``fractions`` of its length (shorter than ``REPOSITION_MIN_MM`` of vertex
+    motion is skipped). These are the "short motions within a state" of the paper's
+    Sub-step 2, used here before a transition as well as at the ends: a transition that
+    is admissible from one pose of a state may be blocked from another (a block standing
+    20 mm from a wall cannot tip towards it, but can once pushed along the floor)."""
+    out: list[Segment] = []
+    for name in domain.names(Family.MOVE_OBJECT):
+        impl = registry.implementation(name)
+        families = getattr(impl, "families", None)
+        if families is None:
+            continue
+        for motion, s_max, params in families(ctx, pose):
+            sw = sweep(ctx.world, motion, s_max)
+            pieces = sw.pieces
+            if not pieces or pieces[0].state != state:
+                continue
+            stay = pieces[0].s1
+            if len(pieces) > 1 or sw.end is SweepEnd.BLOCKED:
+                # keep clear of the state's boundary
+                stay -= min(REPOSITION_MARGIN_MM / max(motion.vertex_speed(ctx.world), 1e-9), 0.25 * stay)
+            speed = motion.vertex_speed(ctx.world)
+            for f in fractions:
+                s_end = f * stay
+                if s_end * speed < REPOSITION_MIN_MM:
+                    continue
+                key = "angle" if motion.kind is not MotionKind.TRANSLATE else "travel"
+                val = math.degrees(s_end) if key == "angle" else s_end
+                out.append(_seg(name, state, motion, s_end, ctx, params, **{key: val}))
+    return out
+
+
+def _candidates(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry, impl: object,
+                t: Transition, pose: Pose, rng: np.random.Generator, limit: int,
+                stats: StreamStats) -> Iterator[tuple[Segment, ...]]:
+    """A transition's stream: the primitive's own samples from ``pose``; when it has none,
+    samples from poses reached by an in-state motion (:func:`reposition`), ranked by the
+    distance of their end pose to T'_g."""
+    n = 0
+    for seg in impl.sample(ctx, t.from_state, t.to_state, pose, rng, limit):  # type: ignore[attr-defined]
+        n += 1
+        yield (seg,)
+    if n or t.from_state.is_free:
+        return
+    scored: list[tuple[float, int, tuple[Segment, ...]]] = []
+    for pre in reposition(ctx, domain, registry, t.from_state, pose):
+        stats.repositions += 1
+        for seg in impl.sample(ctx, t.from_state, t.to_state, pre.end, rng, limit):  # type: ignore[attr-defined]
+            score = float(ctx.goal_distance(seg.poses[-1:])[0])
+            scored.append((score, len(scored), (pre, seg)))
+    scored.sort(key=lambda x: (x[0], x[1]))
+    for _, _, moves in scored[:limit]:
+        yield moves
+
+
 def pose_paths(ctx: PlanningContext, transitions: Sequence[Transition], domain: DomainInfo,
                registry: PrimitiveRegistry, rng: np.random.Generator, stats: StreamStats, *,
                limit: int | None = None, max_expansions: int = 200) -> Iterator[PosePath]:
@@ -173,11 +238,11 @@ def pose_paths(ctx: PlanningContext, transitions: Sequence[Transition], domain: 
                 pose = pre[-1].end
         impl = registry.implementation(t.action)
         found = False
-        for seg in impl.sample(ctx, t.from_state, t.to_state, pose, rng, limit):
-            seg = replace(seg, step=k)
+        for moves in _candidates(ctx, domain, registry, impl, t, pose, rng, limit, stats):
+            moves = tuple(replace(m, step=k) for m in moves)
             stats.expansions += 1
             found = True
-            yield from rec(k + 1, seg.end, segments + tuple(pre) + (seg,))
+            yield from rec(k + 1, moves[-1].end, segments + tuple(pre) + moves)
             if stats.expansions >= max_expansions:
                 return
         if not found:

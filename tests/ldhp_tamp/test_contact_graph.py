@@ -79,13 +79,24 @@ def test_task1_transitions(task1, domain) -> None:
             assert a != b and a in ctx.state_set and b in ctx.state_set
 
 
-def test_vertex_on_vertex_states_are_dropped(task2) -> None:
+def test_vertex_on_convex_vertex_states_are_dropped(task2) -> None:
     sc, ctx = task2
     env = sc.world.environment
+    convex = env.vertices[env.vertex_convex]
     for w in ctx.witnesses:
         for p in w.witnesses:
             v = sc.world.object_vertices(p)
-            assert np.min(np.linalg.norm(v[:, None] - env.vertices[None], axis=2)) > 0.1
+            assert np.min(np.linalg.norm(v[:, None] - convex[None], axis=2)) > 0.1
+
+
+def test_states_in_a_concave_corner_are_kept(task2, domain) -> None:
+    """The block lying in the slot's corner (l4 on the floor, l3 flush with the left
+    wall, v4 in the corner) ends the paper's biplanar slide along floor and wall."""
+    _, ctx = task2
+    corner = S("l4-e1+l3-e2")
+    assert corner in ctx.state_set
+    tr = admissible_transitions(ctx, domain.info, REGISTRY)
+    assert (S("v1-e1+v4-e2"), corner) in tr["biplanar-slide"]
 
 
 def test_relevant_states_prune_only_states_off_every_path(task2, domain) -> None:
@@ -148,14 +159,32 @@ def test_task1_tip_stream_offers_an_overshoot_aligned_back(task1, domain) -> Non
     check_joined(path.segments)
 
 
-def test_stream_dead_end_is_reported(task2, domain) -> None:
+def test_stream_repositions_within_a_state(task2, domain) -> None:
+    """20 mm from the left wall the block cannot tip left onto its side; the stream
+    pushes it along the floor first (an in-state motion) and tips it from there."""
     _, ctx = task2
-    # near the left wall, the block standing on the floor cannot tip left onto its side
     plan = [Transition("air-move", FREE, S("l1-e1")), Transition("tip", S("l1-e1"), S("v1-e1")),
             Transition("tip", S("v1-e1"), S("l4-e1"))]
     stats = StreamStats()
+    paths = list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), stats))
+    assert paths and stats.repositions > 0
+    for path in paths:
+        check_joined(path.segments)
+        last_tip = [s for s in path.segments if s.primitive == "tip" and s.to_state == S("l4-e1")][0]
+        k = path.segments.index(last_tip)
+        before = path.segments[k - 1]
+        assert before.parameters["in_state"] and before.from_state == before.to_state == S("v1-e1")
+        # the pivot v1 is at least the block's diagonal from the left wall
+        assert last_tip.motion.pose(0.0).x >= 160.0
+
+
+def test_stream_dead_end_is_reported(task2, domain) -> None:
+    _, ctx = task2
+    # no rotation of the standing block reaches its top face directly
+    plan = [Transition("air-move", FREE, S("l1-e1")), Transition("tip", S("l1-e1"), S("l3-e1"))]
+    stats = StreamStats()
     assert list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), stats)) == []
-    assert stats.dead_ends[plan[2]] > 0
+    assert stats.dead_ends[plan[1]] > 0
 
 
 def test_a_domain_without_tip_has_no_tip_transitions(task1, domain) -> None:
