@@ -119,8 +119,49 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return EXIT_OK if result.solved else EXIT_NO_PLAN
 
 
+def _comma_names(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected comma-separated names, got {text!r}")
+    return names
+
+
+def _comma_ints(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(n) for n in text.split(",") if n.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """Run scenario x engine x K x seed in worker processes; write CSV, JSON, Markdown.
+    Exit 0 when the bench ran, whatever the solves' outcomes (they are in the rows)."""
+    from ldhp_tamp.bench import BenchOptions, run_bench
+
+    options = BenchOptions(engines=args.engines, seeds=args.seeds, samples=args.samples,
+                           timeout_s=args.timeout, grace_s=args.grace, jobs=args.jobs)
+    quiet = args.quiet
+
+    def progress(msg: str) -> None:
+        if not quiet:
+            print(f"[ldhp-tamp bench] {msg}", file=sys.stderr, flush=True)
+
+    rows, files = run_bench(args.scenarios, options, args.out, progress=progress)
+    written = [files.csv, files.json, files.summary]
+    if args.plots:
+        from ldhp_tamp.bench_plots import write_plots
+
+        plots = write_plots(rows, args.out, options.hard_limit_s)
+        if not plots:
+            progress("--plots: no figure (the runs need two or more K values or vertex counts)")
+        written += plots
+    print(files.summary.read_text(encoding="utf-8"), end="")
+    print("\nwrote " + ", ".join(str(p) for p in written))
+    return EXIT_OK
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
-    "check": cmd_check, "validate": cmd_validate, "solve": cmd_solve}
+    "check": cmd_check, "validate": cmd_validate, "solve": cmd_solve, "bench": cmd_bench}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -155,6 +196,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--engine", metavar="NAME", help="unified-planning engine (default: the scenario's, pyperplan)")
     p.add_argument("--seed", type=int, metavar="N", help="random seed (default: the scenario's)")
     p.add_argument("--emit-pddl", metavar="DIR", help="write the domain and one problem per top-tier iteration")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
+
+    p = sub.add_parser("bench", help="benchmark: every scenario x engine x K x seed, in worker processes",
+                       description="Solve every combination scenario x engine x K x seed, each in a worker\n"
+                                   "process of its own (at most --jobs at once), and write runs.csv,\n"
+                                   "runs.json and summary.md (success rate, times, plan length) into --out;\n"
+                                   "--plots adds time-against-K and time-against-vertex-count figures.\n"
+                                   "See docs/benchmarks.md.",
+                       epilog="exit status:\n  0  the bench ran, whatever the solves' outcomes (see the "
+                              "status column)\n  2  bad input or usage (the message names the file and "
+                              "the problem); nothing was run\n",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scenarios", nargs="+", metavar="SCENARIO", help="scenario TOML files")
+    p.add_argument("--engines", type=_comma_names, metavar="A,B",
+                   help="comma-separated engines, e.g. pyperplan,fast-downward (default: each scenario's)")
+    p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0..N-1 per combination (default 1)")
+    p.add_argument("--samples", type=_comma_ints, metavar="K1,K2",
+                   help="comma-separated K, grasp samples per edge (default: each scenario's)")
+    p.add_argument("--timeout", type=float, metavar="S",
+                   help="seconds per run; passed to the solver if it has a timeout option, and enforced "
+                        "as a hard limit of S + --grace by terminating the worker (status 'timeout')")
+    p.add_argument("--grace", type=float, default=10.0, metavar="S",
+                   help="seconds added to --timeout for the hard limit (default 10)")
+    p.add_argument("--jobs", type=int, default=1, metavar="J", help="worker processes at once (default 1)")
+    p.add_argument("--out", default="bench-results", metavar="DIR",
+                   help="output directory (default: bench-results)")
+    p.add_argument("--plots", action="store_true",
+                   help="also draw time_vs_samples / time_vs_vertices .png and .svg when the runs vary K "
+                        "or the vertex count")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
     return parser
 

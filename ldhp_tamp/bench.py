@@ -1,0 +1,581 @@
+"""The benchmark harness: ``ldhp-tamp bench``.
+
+Every combination scenario x engine x K (samples per edge) x seed is one *run*: one
+:func:`ldhp_tamp.tamp.solve` in a worker process of its own. Data flows through plain
+functions over small values::
+
+    runs = plan_runs(["scenarios/example_pick.toml"], BenchOptions(seeds=2, jobs=2))
+    rows = run_all(runs, options)                  # BenchRow per run, in the order of runs
+    files = write_results(rows, out_dir, options)  # runs.csv, runs.json, summary.md
+
+or all three at once with :func:`run_bench`.
+
+Isolation and time limits. Each run gets a fresh process (forked from a forkserver that
+has imported the planner once, so a run costs no import time) in a process group of its
+own; at most ``jobs`` run at once. A run that crashes, or raises, is an ``error`` row; the
+others carry on. With ``timeout_s`` the run's solve gets ``SolveOptions(timeout=...)``
+when the planner has that option, and the parent enforces ``timeout_s + grace_s`` as a
+hard limit by terminating the whole process group (Fast Downward's planner process
+included): that run is a ``timeout`` row. Fast Downward writes files into its working
+directory; :func:`ldhp_tamp.symbolic.solve` runs every engine call in a fresh
+``tempfile`` directory, and a process's working directory is its own, so parallel runs
+never share one.
+
+Why not :class:`concurrent.futures.ProcessPoolExecutor`: it cannot stop one task. Killing
+a pool worker breaks the pool (``BrokenProcessPool`` fails every pending future), and a
+task that hangs holds its worker forever. The scheduler here is the same idea (``jobs``
+workers, results collected as they come) with one process per run, which it can kill.
+
+Times. ``time_*_s`` are the solve's own wall time per tier (the plan's ``stats.time_s``);
+``wall_s`` is the parent's wall time for the run, process start-up included. The summary
+reports ``time_total_s`` over solved runs. With ``jobs`` > 1 the runs share the CPUs:
+compare times taken with the same ``jobs`` only.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import dataclasses
+import enum
+import io
+import json
+import logging
+import math
+import multiprocessing
+import multiprocessing.connection
+import os
+import platform
+import signal
+import statistics
+import sys
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from ldhp_tamp.errors import EngineError, InputError
+from ldhp_tamp.files import write_text_atomic
+
+__all__ = [
+    "BENCH_FORMAT",
+    "BenchFiles",
+    "BenchOptions",
+    "BenchRow",
+    "BenchStatus",
+    "RunSpec",
+    "format_summary",
+    "plan_runs",
+    "run_all",
+    "run_bench",
+    "solver_has_timeout",
+    "write_results",
+]
+
+log = logging.getLogger(__name__)
+
+BENCH_FORMAT = "ldhp-bench/1"
+CSV_NAME = "runs.csv"
+JSON_NAME = "runs.json"
+SUMMARY_NAME = "summary.md"
+
+#: Seconds a terminated worker gets to clean up (SIGTERM) before it is killed (SIGKILL).
+_TERM_WAIT_S = 2.0
+#: Seconds to wait for a worker to exit after it has sent its row.
+_EXIT_WAIT_S = 10.0
+
+
+class BenchStatus(enum.Enum):
+    SOLVED = "solved"
+    FAILED = "failed"
+    TIMEOUT = "timeout"
+    ERROR = "error"
+
+
+@dataclass(frozen=True)
+class BenchOptions:
+    """What to run and how. ``engines=None``: each scenario's own engine;
+    ``samples=None``: each scenario's own K (``[planner] samples_per_edge``).
+
+    Raises
+    ------
+    InputError
+        On a value out of range (the message names the option).
+    """
+
+    engines: tuple[str, ...] | None = None
+    seeds: int = 1
+    samples: tuple[int, ...] | None = None
+    timeout_s: float | None = None
+    grace_s: float = 10.0
+    jobs: int = 1
+
+    def __post_init__(self) -> None:
+        if self.engines is not None:
+            object.__setattr__(self, "engines", tuple(self.engines))
+            if not self.engines:
+                raise InputError("--engines: give at least one engine")
+        if self.samples is not None:
+            object.__setattr__(self, "samples", tuple(self.samples))
+            if not self.samples or any(isinstance(k, bool) or not isinstance(k, int) or k < 1
+                                       for k in self.samples):
+                raise InputError(f"--samples: samples per edge must be integers >= 1, got {self.samples}")
+        if self.seeds < 1:
+            raise InputError(f"--seeds: need at least 1 seed, got {self.seeds}")
+        if self.jobs < 1:
+            raise InputError(f"--jobs: need at least 1 worker, got {self.jobs}")
+        if self.timeout_s is not None and not (math.isfinite(self.timeout_s) and self.timeout_s > 0):
+            raise InputError(f"--timeout: must be a positive number of seconds, got {self.timeout_s}")
+        if not (math.isfinite(self.grace_s) and self.grace_s >= 0):
+            raise InputError(f"--grace: must be >= 0 seconds, got {self.grace_s}")
+
+    @property
+    def hard_limit_s(self) -> float | None:
+        """The parent's limit per run: ``timeout_s + grace_s``, or none."""
+        return None if self.timeout_s is None else self.timeout_s + self.grace_s
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run: what the worker needs (picklable, no heavy objects)."""
+
+    index: int
+    scenario_file: str
+    scenario: str
+    engine: str
+    seed: int
+    samples_per_edge: int
+    object_vertices: int
+    timeout_s: float | None = None
+
+
+@dataclass(frozen=True)
+class BenchRow:
+    """One run's outcome: a row of ``runs.csv`` and of ``runs.json``'s ``rows``.
+
+    Counts and times are ``None`` when the run produced no plan (``timeout``, ``error``).
+    """
+
+    scenario: str
+    scenario_file: str
+    engine: str
+    seed: int
+    samples_per_edge: int
+    object_vertices: int
+    status: BenchStatus
+    reason: str
+    wall_s: float
+    time_total_s: float | None = None
+    time_setup_s: float | None = None
+    time_symbolic_s: float | None = None
+    time_streams_s: float | None = None
+    time_grasp_graph_s: float | None = None
+    steps: int | None = None
+    waypoints: int | None = None
+    feasibility_checks: int | None = None
+    contact_state_nodes: int | None = None
+    grasp_graph_nodes: int | None = None
+    grasp_graph_edges: int | None = None
+    top_iterations: int | None = None
+    refinements: int | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values, in column order (the status as its string)."""
+        d = dataclasses.asdict(self)
+        d["status"] = self.status.value
+        return d
+
+
+#: The CSV header, in column order.
+COLUMNS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(BenchRow))
+
+
+@dataclass(frozen=True)
+class BenchFiles:
+    """The files :func:`write_results` wrote."""
+
+    csv: Path
+    json: Path
+    summary: Path
+
+
+# --------------------------------------------------------------------------- runs
+
+
+def solver_has_timeout() -> bool:
+    """Whether :class:`ldhp_tamp.tamp.SolveOptions` has a ``timeout`` field (seconds)."""
+    from ldhp_tamp.tamp import SolveOptions
+
+    return "timeout" in {f.name for f in dataclasses.fields(SolveOptions)}
+
+
+def plan_runs(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions) -> tuple[RunSpec, ...]:
+    """Load and check every scenario and engine, then list the runs: scenario x engine x
+    K x seed (seeds ``0 .. seeds-1``), in that order.
+
+    Raises
+    ------
+    InputError
+        A scenario that cannot be loaded (the message names the file), an engine that is
+        not installed (the message lists the installed ones), no scenario at all.
+    """
+    from ldhp_tamp.scenario import load_scenario
+    from ldhp_tamp.symbolic import available_engines
+
+    if not scenarios:
+        raise InputError("no scenario given")
+    loaded = [(Path(p), load_scenario(p)) for p in scenarios]
+    installed = available_engines()
+    wanted = options.engines or tuple(dict.fromkeys(s.settings.engine for _, s in loaded))
+    unknown = [e for e in wanted if e not in installed]
+    if unknown:
+        raise EngineError(f"unknown planning engine {unknown[0]!r}; installed: {', '.join(installed)}")
+    specs: list[RunSpec] = []
+    for path, sc in loaded:
+        engines = options.engines or (sc.settings.engine,)
+        ks = options.samples or (sc.settings.samples_per_edge,)
+        for engine in engines:
+            for k in ks:
+                for seed in range(options.seeds):
+                    specs.append(RunSpec(index=len(specs), scenario_file=str(path), scenario=sc.name,
+                                         engine=engine, seed=seed, samples_per_edge=k,
+                                         object_vertices=sc.world.object.n, timeout_s=options.timeout_s))
+    return tuple(specs)
+
+
+def _row(spec: RunSpec, status: BenchStatus, reason: str, wall_s: float, **counts: Any) -> BenchRow:
+    return BenchRow(scenario=spec.scenario, scenario_file=spec.scenario_file, engine=spec.engine,
+                    seed=spec.seed, samples_per_edge=spec.samples_per_edge,
+                    object_vertices=spec.object_vertices, status=status, reason=reason,
+                    wall_s=round(wall_s, 4), **counts)
+
+
+def solve_run(spec: RunSpec) -> BenchRow:
+    """Run one solve in this process and describe it as a row.
+
+    Raises whatever :func:`ldhp_tamp.tamp.solve` raises (the worker turns it into an
+    ``error`` row).
+    """
+    from ldhp_tamp.scenario import load_scenario
+    from ldhp_tamp.tamp import SolveOptions, solve
+
+    start = time.perf_counter()
+    scenario = load_scenario(spec.scenario_file)
+    knobs: dict[str, Any] = {"engine": spec.engine, "seed": spec.seed, "samples_per_edge": spec.samples_per_edge}
+    if spec.timeout_s is not None and solver_has_timeout():
+        knobs["timeout"] = spec.timeout_s
+    result = solve(scenario, SolveOptions(**knobs))
+    plan = result.plan
+    stats = plan.stats
+    values = {s.value for s in BenchStatus}
+    status = BenchStatus(result.status.value) if result.status.value in values else BenchStatus.FAILED
+    times = stats.time_s
+    return _row(spec, status, result.reason or (plan.reason or ""), time.perf_counter() - start,
+                time_total_s=times.get("total"), time_setup_s=times.get("setup"),
+                time_symbolic_s=times.get("symbolic"), time_streams_s=times.get("streams"),
+                time_grasp_graph_s=times.get("grasp_graph"),
+                steps=len(plan.steps), waypoints=sum(len(s.waypoints) for s in plan.steps),
+                feasibility_checks=stats.feasibility_checks, contact_state_nodes=stats.contact_state_nodes,
+                grasp_graph_nodes=stats.grasp_graph_nodes, grasp_graph_edges=stats.grasp_graph_edges,
+                top_iterations=stats.top_iterations, refinements=stats.refinements)
+
+
+def _on_sigterm(signum: int, _frame: Any) -> None:
+    raise SystemExit(128 + signum)  # unwinds: temporary directories are removed
+
+
+def _worker(spec: RunSpec, conn: multiprocessing.connection.Connection) -> None:
+    """Body of a worker process: one run, one row sent back through ``conn``."""
+    os.setpgid(0, 0)  # a process group of its own: the parent stops the engine's children too
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    start = time.perf_counter()
+    try:
+        row = solve_run(spec)
+    except Exception as exc:  # any failure of one run is a row, not a crash of the bench
+        last = traceback.extract_tb(exc.__traceback__)[-1:]
+        where = f" (at {Path(last[0].filename).name}:{last[0].lineno})" if last else ""
+        row = _row(spec, BenchStatus.ERROR, f"{type(exc).__name__}: {exc}{where}", time.perf_counter() - start)
+    conn.send(row)
+    conn.close()
+
+
+@dataclass
+class _Active:
+    spec: RunSpec
+    process: multiprocessing.process.BaseProcess
+    conn: multiprocessing.connection.Connection
+    start: float
+    deadline: float | None
+
+
+def _context() -> multiprocessing.context.BaseContext:
+    """A forkserver that has imported the planner (a fork then costs no import time);
+    ``spawn`` where there is no forkserver."""
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["ldhp_tamp.bench", "ldhp_tamp.tamp"])
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
+def _start(ctx: multiprocessing.context.BaseContext, spec: RunSpec, hard_limit_s: float | None) -> _Active:
+    reader, writer = ctx.Pipe(duplex=False)
+    process = ctx.Process(target=_worker, args=(spec, writer), name=f"ldhp-bench-{spec.index}")
+    process.start()  # the first start waits for the forkserver's imports: not the run's time
+    start = time.monotonic()
+    writer.close()  # the worker holds the only write end: EOF when it dies
+    deadline = None if hard_limit_s is None else start + hard_limit_s
+    return _Active(spec, process, reader, start, deadline)
+
+
+def _stop(active: _Active) -> None:
+    """Terminate a worker and its process group: SIGTERM, then SIGKILL."""
+    proc = active.process
+    pid = proc.pid
+    for sig, wait_s in ((signal.SIGTERM, _TERM_WAIT_S), (signal.SIGKILL, _EXIT_WAIT_S)):
+        if pid is None:
+            break
+        try:
+            os.killpg(pid, sig)
+        except (ProcessLookupError, PermissionError):
+            # the worker has not made its group yet (or is gone): signal it alone
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, sig)
+        proc.join(wait_s)
+        if proc.exitcode is not None:
+            # the group may outlive its leader (an engine's planner process)
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pid, signal.SIGKILL)
+            break
+    active.conn.close()
+
+
+def _collect(active: _Active) -> BenchRow:
+    """The row of a worker whose pipe is readable: its row, or an error if it died."""
+    wall = time.monotonic() - active.start
+    try:
+        row: BenchRow | None = active.conn.recv()
+    except (EOFError, OSError):
+        row = None
+    active.process.join(_EXIT_WAIT_S)
+    if active.process.exitcode is None:
+        log.warning("run %d: the worker did not exit after its result; stopping it", active.spec.index)
+        _stop(active)
+    active.conn.close()
+    if row is None:
+        code = active.process.exitcode
+        how = f"killed by signal {-code}" if code is not None and code < 0 else f"exit status {code}"
+        return _row(active.spec, BenchStatus.ERROR, f"the worker process died without a result ({how})", wall)
+    return dataclasses.replace(row, wall_s=round(wall, 4))
+
+
+def run_all(specs: Sequence[RunSpec], options: BenchOptions,
+            on_row: Callable[[int, BenchRow], None] | None = None) -> tuple[BenchRow, ...]:
+    """Run every spec, at most ``options.jobs`` at once, each in its own process.
+
+    ``on_row(done, row)`` is called as each run ends (``done`` counts finished runs). The
+    rows come back in the order of ``specs``. On an exception (Ctrl-C) the running
+    workers are stopped before it propagates.
+    """
+    ctx = _context()
+    pending = deque(specs)
+    active: list[_Active] = []
+    rows: dict[int, BenchRow] = {}
+    hard = options.hard_limit_s
+    try:
+        while pending or active:
+            while pending and len(active) < options.jobs:
+                active.append(_start(ctx, pending.popleft(), hard))
+            deadlines = [a.deadline for a in active if a.deadline is not None]
+            wait_s = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
+            ready = multiprocessing.connection.wait([a.conn for a in active], timeout=wait_s)
+            now = time.monotonic()
+            for a in list(active):
+                if a.conn in ready:
+                    row = _collect(a)
+                elif a.deadline is not None and now >= a.deadline:
+                    _stop(a)
+                    row = _row(a.spec, BenchStatus.TIMEOUT,
+                               f"hard limit: no result after {hard:g} s (timeout {options.timeout_s:g} s "
+                               f"+ grace {options.grace_s:g} s); the worker was terminated", now - a.start)
+                else:
+                    continue
+                active.remove(a)
+                rows[a.spec.index] = row
+                if on_row is not None:
+                    on_row(len(rows), row)
+    finally:
+        for a in active:
+            _stop(a)
+    return tuple(rows[s.index] for s in specs)
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def _csv_value(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, enum.Enum):
+        return str(value.value)
+    if isinstance(value, float):
+        return f"{value:.4f}"
+    return str(value)
+
+
+def format_csv(rows: Iterable[BenchRow]) -> str:
+    """``runs.csv``: a header of :data:`COLUMNS`, one line per run; empty cells for ``None``."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(COLUMNS)
+    for row in rows:
+        writer.writerow([_csv_value(getattr(row, c)) for c in COLUMNS])
+    return buf.getvalue()
+
+
+def _host() -> dict[str, Any]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        ours = version("ldhp-tamp")
+    except PackageNotFoundError:  # pragma: no cover - running from a bare checkout
+        ours = None
+    return {"python": platform.python_version(), "platform": platform.platform(),
+            "cpus": os.cpu_count(), "ldhp_tamp": ours}
+
+
+def format_json(rows: Sequence[BenchRow], options: BenchOptions, created: str | None = None) -> str:
+    """``runs.json``: ``format``, ``created``, the options, the host and the rows."""
+    doc = {
+        "format": BENCH_FORMAT,
+        "created": created or datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "options": {"engines": list(options.engines) if options.engines else None, "seeds": options.seeds,
+                    "samples_per_edge": list(options.samples) if options.samples else None,
+                    "timeout_s": options.timeout_s, "grace_s": options.grace_s,
+                    "hard_limit_s": options.hard_limit_s, "jobs": options.jobs,
+                    "solver_timeout": options.timeout_s is not None and solver_has_timeout()},
+        "host": _host(),
+        "columns": list(COLUMNS),
+        "rows": [r.as_dict() for r in rows],
+    }
+    return json.dumps(doc, indent=2) + "\n"
+
+
+def _num(x: float | None, digits: int = 2) -> str:
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def format_summary(rows: Sequence[BenchRow], options: BenchOptions) -> str:
+    """``summary.md``: per scenario, engine and K, the success rate, the median, mean and
+    max solve time and the median plan length over solved runs, the median time per
+    tier, and the reason of every run that was not solved."""
+    groups: dict[tuple[str, str, int], list[BenchRow]] = {}
+    for r in rows:
+        groups.setdefault((r.scenario, r.engine, r.samples_per_edge), []).append(r)
+    limit = ("none" if options.timeout_s is None else
+             f"{options.timeout_s:g} s (hard limit {options.hard_limit_s:g} s; passed to the solver: "
+             f"{'yes' if solver_has_timeout() else 'no, the planner has no timeout option'})")
+    lines = [
+        "# Benchmark summary", "",
+        f"{len(rows)} runs, {options.jobs} at a time; timeout: {limit}.",
+        "Times are the solver's own wall time (`stats.time_s` of the plan, worker start-up "
+        "excluded), over solved runs; with more than one job at a time runs share the CPUs.", "",
+        "| scenario | engine | K | runs | solved | success | timeout | error "
+        "| median time (s) | mean time (s) | max time (s) | median steps |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    tiers = ("setup", "symbolic", "streams", "grasp_graph")
+    tier_lines = [
+        "", "## Median time per tier, solved runs (s)", "",
+        "| scenario | engine | K | " + " | ".join(tiers) + " | total |",
+        "| --- | --- | ---: |" + " ---: |" * (len(tiers) + 1),
+    ]
+    for (scenario, engine, k), rs in groups.items():
+        ok = [r for r in rs if r.status is BenchStatus.SOLVED]
+        times = [r.time_total_s for r in ok if r.time_total_s is not None]
+        count = {s: sum(r.status is s for r in rs) for s in BenchStatus}
+        steps = [r.steps for r in ok if r.steps is not None]
+        lines.append(
+            f"| {scenario} | {engine} | {k} | {len(rs)} | {len(ok)} | {100 * len(ok) / len(rs):.0f}% "
+            f"| {count[BenchStatus.TIMEOUT]} | {count[BenchStatus.ERROR]} "
+            f"| {_num(statistics.median(times) if times else None)} "
+            f"| {_num(statistics.fmean(times) if times else None)} | {_num(max(times) if times else None)} "
+            f"| {_num(statistics.median(steps) if steps else None, 1)} |")
+        medians = []
+        for t in (*tiers, "total"):
+            vals = [v for r in ok if (v := getattr(r, f"time_{t}_s")) is not None]
+            medians.append(_num(statistics.median(vals) if vals else None))
+        tier_lines.append(f"| {scenario} | {engine} | {k} | " + " | ".join(medians) + " |")
+    lines += tier_lines
+    unsolved = [r for r in rows if r.status is not BenchStatus.SOLVED]
+    if unsolved:
+        lines += ["", "## Runs not solved", ""]
+        for r in unsolved:
+            reason = " ".join(r.reason.split())
+            if len(reason) > 300:
+                reason = reason[:297] + "..."
+            lines.append(f"- {r.scenario}, {r.engine}, K {r.samples_per_edge}, seed {r.seed}: "
+                         f"**{r.status.value}**: {reason}")
+    return "\n".join(lines) + "\n"
+
+
+def write_results(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str], options: BenchOptions,
+                  summary: bool = True) -> BenchFiles:
+    """Write ``runs.csv``, ``runs.json`` and (``summary``) ``summary.md`` into ``out_dir``,
+    each atomically."""
+    out = _out_dir(out_dir)
+    files = BenchFiles(out / CSV_NAME, out / JSON_NAME, out / SUMMARY_NAME)
+    write_text_atomic(files.csv, format_csv(rows))
+    write_text_atomic(files.json, format_json(rows, options))
+    if summary:
+        write_text_atomic(files.summary, format_summary(rows, options))
+    return files
+
+
+def _out_dir(out_dir: str | os.PathLike[str]) -> Path:
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise InputError(f"{out}: --out must be a directory, and this is a file") from None
+    except OSError as exc:
+        raise InputError(f"{out}: cannot create the output directory: {exc.strerror or exc}") from None
+    return out
+
+
+def run_bench(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions,
+              out_dir: str | os.PathLike[str],
+              progress: Callable[[str], None] | None = None) -> tuple[tuple[BenchRow, ...], BenchFiles]:
+    """Check the input, run every combination, write the results.
+
+    ``runs.csv`` and ``runs.json`` are rewritten as each run ends (so an interrupted bench
+    keeps what it measured), ``summary.md`` once at the end.
+
+    Raises
+    ------
+    InputError
+        Before anything runs: a scenario that cannot be loaded, an unknown engine, an
+        output directory that cannot be created.
+    """
+    specs = plan_runs(scenarios, options)
+    _out_dir(out_dir)
+    say = progress or (lambda _msg: None)
+    say(f"{len(specs)} runs, {options.jobs} at a time"
+        + (f", hard limit {options.hard_limit_s:g} s per run" if options.hard_limit_s is not None else ""))
+    finished: list[BenchRow] = []  # in the order runs end
+
+    def on_row(done: int, row: BenchRow) -> None:
+        finished.append(row)
+        t = f"{row.time_total_s:.2f} s" if row.time_total_s is not None else f"{row.wall_s:.2f} s wall"
+        say(f"[{done}/{len(specs)}] {row.scenario} {row.engine} K={row.samples_per_edge} "
+            f"seed={row.seed}: {row.status.value} ({t})")
+        write_results(finished, out_dir, options, summary=False)
+
+    rows = run_all(specs, options, on_row)
+    files = write_results(rows, out_dir, options)
+    return rows, files

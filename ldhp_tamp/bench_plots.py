@@ -1,0 +1,139 @@
+"""Scaling figures from benchmark rows (:mod:`ldhp_tamp.bench`): planning time against K
+(samples per edge) and against the object's vertex count, PNG and SVG.
+
+matplotlib is imported when a figure is drawn, with the ``Agg`` backend (no display).
+Each figure has two panels: the solve time (``time_total_s``) and the number of
+feasibility checks, both on log scales; a line joins the medians over seeds of solved
+runs, dots are single solved runs, crosses runs that were not solved (failed at the time
+shown, or stopped by the time limit, drawn at the limit).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import statistics
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from ldhp_tamp.bench import BenchRow, BenchStatus
+from ldhp_tamp.files import atomic_output
+
+__all__ = ["Axis", "SAMPLES", "VERTICES", "plot_scaling", "write_plots"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Axis:
+    """What goes on the x axis: a :class:`BenchRow` field, its label, the fields that
+    name a series (one line each), and the figure's file stem."""
+
+    field: str
+    label: str
+    series: tuple[str, ...]
+    stem: str
+    title: str
+
+
+SAMPLES = Axis("samples_per_edge", "K, grasp samples per object edge", ("scenario", "engine"),
+               "time_vs_samples", "Cost against the grasp sampling density K")
+VERTICES = Axis("object_vertices", "object vertices (regular polygon)", ("engine", "samples_per_edge"),
+                "time_vs_vertices", "Cost against the object's complexity")
+
+_PANELS = (("time_total_s", "planning time (s), log scale"),
+           ("feasibility_checks", "feasibility checks, log scale"))
+
+
+def _label(row: BenchRow, fields: Sequence[str]) -> str:
+    parts = []
+    for f in fields:
+        v = getattr(row, f)
+        parts.append(f"K={v}" if f == "samples_per_edge" else str(v))
+    return ", ".join(parts)
+
+
+def plot_scaling(rows: Sequence[BenchRow], axis: Axis, out_dir: str | os.PathLike[str],
+                 hard_limit_s: float | None = None) -> tuple[Path, Path] | None:
+    """Draw ``rows`` against ``axis``; write ``<stem>.png`` and ``<stem>.svg`` atomically.
+
+    Returns the two paths, or ``None`` (and draws nothing) when the rows hold fewer than
+    two distinct x values.
+    """
+    xs = {getattr(r, axis.field) for r in rows}
+    if len(xs) < 2:
+        log.info("%s: fewer than two values of %s; no figure", axis.stem, axis.field)
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    series: dict[str, list[BenchRow]] = {}
+    for r in rows:
+        series.setdefault(_label(r, axis.series), []).append(r)
+    fig, panels = plt.subplots(1, len(_PANELS), figsize=(11, 4.4), constrained_layout=True)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    markers = "osD^vP*X"
+    for i, (name, rs) in enumerate(sorted(series.items())):
+        colour, marker = colours[i % len(colours)], markers[i % len(markers)]
+        for ax, (metric, _ylabel) in zip(panels, _PANELS):
+            solved = [r for r in rs if r.status is BenchStatus.SOLVED and getattr(r, metric) is not None]
+            by_x: dict[int, list[float]] = {}
+            for r in solved:
+                by_x.setdefault(getattr(r, axis.field), []).append(getattr(r, metric))
+            mx = sorted(by_x)
+            ax.plot(mx, [statistics.median(by_x[x]) for x in mx], color=colour, marker=marker,
+                    label=name, linewidth=1.6, markersize=6)
+            ax.scatter([getattr(r, axis.field) for r in solved], [getattr(r, metric) for r in solved],
+                       color=colour, s=10, alpha=0.45, zorder=3)
+            bad = []
+            for r in rs:
+                if r.status is BenchStatus.SOLVED:
+                    continue
+                y = getattr(r, metric)
+                if y is None and metric == "time_total_s" and r.status is BenchStatus.TIMEOUT:
+                    y = hard_limit_s or r.wall_s
+                if y:
+                    bad.append((getattr(r, axis.field), y))
+            if bad:
+                ax.scatter(*zip(*bad), color=colour, marker="x", s=45, zorder=4)
+    for ax, (_metric, ylabel) in zip(panels, _PANELS):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ticks = sorted(xs)
+        ax.set_xticks(ticks, [str(t) for t in ticks])
+        ax.xaxis.set_minor_formatter(NullFormatter())  # the runs' K values only
+        ax.set_xlabel(axis.label)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="major", alpha=0.35)
+        ax.grid(True, which="minor", axis="y", alpha=0.12)
+    handles, labels = panels[0].get_legend_handles_labels()
+    if any(r.status is not BenchStatus.SOLVED for r in rows):
+        handles.append(plt.Line2D([], [], color="grey", marker="x", linestyle="none"))
+        labels.append("not solved")
+    handles.append(plt.Line2D([], [], color="grey", marker="o", markersize=3, alpha=0.5, linestyle="none"))
+    labels.append("one solved run (line: median)")
+    panels[0].legend(handles, labels, fontsize=8, loc="best")
+    fig.suptitle(axis.title)
+    out = Path(out_dir)
+    paths = (out / f"{axis.stem}.png", out / f"{axis.stem}.svg")
+    for path in paths:
+        with atomic_output(path, binary=True) as (f, _tmp):
+            fig.savefig(f, format=path.suffix[1:], dpi=150)
+    plt.close(fig)
+    return paths
+
+
+def write_plots(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str],
+                hard_limit_s: float | None = None) -> list[Path]:
+    """Every figure the rows support: against K when they hold two or more K values,
+    against the vertex count when two or more vertex counts. Returns the files written."""
+    written: list[Path] = []
+    for axis in (SAMPLES, VERTICES):
+        paths = plot_scaling(rows, axis, out_dir, hard_limit_s)
+        if paths:
+            written.extend(paths)
+    return written

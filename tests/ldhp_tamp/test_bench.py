@@ -1,0 +1,179 @@
+"""``ldhp-tamp bench``: worker processes, time limits, CSV / JSON / Markdown, figures.
+
+The runs are real solves in real worker processes (the pick example, ~1 s each); the
+time limit is tested on task 1, which takes seconds, with a hard limit of 0.01 s.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+import math
+import time
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from ldhp_tamp.bench import (
+    BENCH_FORMAT,
+    COLUMNS,
+    BenchOptions,
+    BenchRow,
+    BenchStatus,
+    RunSpec,
+    format_csv,
+    format_summary,
+    run_all,
+    run_bench,
+)
+from ldhp_tamp.bench_plots import SAMPLES, plot_scaling, write_plots
+from ldhp_tamp.cli import EXIT_BAD_INPUT, EXIT_OK, main
+from ldhp_tamp.errors import InputError
+from ldhp_tamp.resources import scenarios_dir
+from ldhp_tamp.scenario import load_scenario_string
+
+REPO = Path(__file__).resolve().parents[2]
+PICK = scenarios_dir() / "example_pick.toml"
+TASK1 = scenarios_dir() / "task1_zero_mobility_lift.toml"
+
+
+def test_bench_of_the_pick_example_two_seeds_two_jobs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "bench"
+    assert main(["bench", str(PICK), "--seeds", "2", "--jobs", "2", "--out", str(out), "-q"]) == EXIT_OK
+    stdout = capsys.readouterr().out
+    with (out / "runs.csv").open(newline="", encoding="utf-8") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        rows = [dict(zip(header, r)) for r in reader]
+    assert tuple(header) == COLUMNS
+    assert [(r["scenario"], r["engine"], r["seed"], r["samples_per_edge"]) for r in rows] == \
+        [("example-pick", "pyperplan", "0", "100"), ("example-pick", "pyperplan", "1", "100")]
+    assert all(r["status"] == "solved" and r["reason"] == "" for r in rows)
+    for r in rows:
+        assert int(r["steps"]) >= 2 and int(r["waypoints"]) > int(r["steps"])
+        assert int(r["feasibility_checks"]) > 0 and int(r["grasp_graph_nodes"]) > 0
+        assert int(r["object_vertices"]) == 4 and int(r["contact_state_nodes"]) > 0
+        assert float(r["wall_s"]) >= float(r["time_total_s"]) >= float(r["time_grasp_graph_s"]) > 0
+
+    doc = json.loads((out / "runs.json").read_text(encoding="utf-8"))
+    assert doc["format"] == BENCH_FORMAT and doc["columns"] == list(COLUMNS)
+    assert doc["options"]["jobs"] == 2 and doc["options"]["seeds"] == 2
+    assert [r["seed"] for r in doc["rows"]] == [0, 1]
+    assert all(r["status"] == "solved" and r["time_total_s"] > 0 for r in doc["rows"])
+    assert doc["rows"][0]["time_total_s"] == pytest.approx(float(rows[0]["time_total_s"]), abs=1e-4)
+
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    assert "| example-pick | pyperplan | 100 | 2 | 2 | 100% | 0 | 0 |" in summary
+    assert "## Median time per tier" in summary and "Runs not solved" not in summary
+    assert summary in stdout and "runs.csv" in stdout
+    assert not list(out.glob(".*.tmp*")), "atomic writes leave no temporary files"
+
+
+def test_a_run_over_the_hard_limit_is_a_timeout_row(tmp_path: Path) -> None:
+    options = BenchOptions(timeout_s=0.01, grace_s=0.0)
+    t0 = time.monotonic()
+    rows, files = run_bench([TASK1], options, tmp_path)
+    elapsed = time.monotonic() - t0
+    (row,) = rows
+    assert row.status is BenchStatus.TIMEOUT and "hard limit" in row.reason
+    assert row.time_total_s is None and row.steps is None
+    assert elapsed < 15  # task 1 takes seconds: the worker was stopped, not waited for
+    assert "| task1-zero-mobility-lift | pyperplan | 100 | 1 | 0 | 0% | 1 | 0 |" in files.summary.read_text()
+    assert next(csv.DictReader(files.csv.open()))["status"] == "timeout"
+
+
+def test_a_run_that_raises_is_an_error_row_and_the_others_run(tmp_path: Path) -> None:
+    gone = tmp_path / "deleted.toml"
+    specs = [RunSpec(0, str(gone), "deleted", "pyperplan", 0, 100, 4),
+             RunSpec(1, str(PICK), "example-pick", "pyperplan", 0, 100, 4)]
+    seen: list[int] = []
+    rows = run_all(specs, BenchOptions(jobs=2), on_row=lambda done, _row: seen.append(done))
+    assert [r.scenario for r in rows] == ["deleted", "example-pick"]  # the order of the specs
+    assert rows[0].status is BenchStatus.ERROR
+    assert "ScenarioError" in rows[0].reason and "deleted.toml" in rows[0].reason
+    assert rows[1].status is BenchStatus.SOLVED
+    assert seen == [1, 2]
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["missing.toml"], "missing.toml"),
+    ([str(PICK), "--engines", "no-such-engine"], "no-such-engine"),
+    ([str(PICK), "--samples", "0,10"], "--samples"),
+    ([str(PICK), "--jobs", "0"], "--jobs"),
+    ([str(PICK), "--timeout", "-1"], "--timeout"),
+])
+def test_bad_input_exits_2_before_anything_runs(argv: list[str], named: str, tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "never"
+    assert main(["bench", *argv, "--out", str(out)]) == EXIT_BAD_INPUT
+    captured = capsys.readouterr()
+    assert captured.out == "" and "Traceback" not in captured.err
+    assert captured.err.startswith("error: ") and named in captured.err
+    assert not out.exists()
+
+
+def test_bench_options_refuse_bad_values() -> None:
+    with pytest.raises(InputError, match="--seeds"):
+        BenchOptions(seeds=0)
+    with pytest.raises(InputError, match="--grace"):
+        BenchOptions(grace_s=math.nan)
+    with pytest.raises(InputError, match="--engines"):
+        BenchOptions(engines=())
+    assert BenchOptions(timeout_s=5, grace_s=10).hard_limit_s == 15
+    assert BenchOptions().hard_limit_s is None
+
+
+def _row(k: int, seed: int, status: BenchStatus, total: float | None, checks: int | None = None,
+         steps: int | None = None, reason: str = "") -> BenchRow:
+    return BenchRow("s", "s.toml", "pyperplan", seed, k, 4, status, reason, wall_s=(total or 0.0) + 0.5,
+                    time_total_s=total, time_setup_s=None if total is None else total / 4,
+                    time_grasp_graph_s=None if total is None else total / 2,
+                    steps=steps, feasibility_checks=checks)
+
+
+def test_summary_counts_statuses_and_times_solved_runs_only() -> None:
+    rows = [_row(10, 0, BenchStatus.SOLVED, 1.0, 100, 2), _row(10, 1, BenchStatus.SOLVED, 3.0, 300, 4),
+            _row(10, 2, BenchStatus.FAILED, 9.0, 900, 0, reason="bottom tier: no grasp"),
+            _row(10, 3, BenchStatus.TIMEOUT, None, reason="hard limit")]
+    text = format_summary(rows, BenchOptions(seeds=4, timeout_s=5))
+    assert "| s | pyperplan | 10 | 4 | 2 | 50% | 1 | 0 | 2.00 | 2.00 | 3.00 | 3.0 |" in text
+    assert "| s | pyperplan | 10 | 0.50 | - | - | 1.00 | 2.00 |" in text  # per tier: setup, ..., total
+    assert "seed 2: **failed**: bottom tier: no grasp" in text and "seed 3: **timeout**" in text
+    lines = format_csv(rows).splitlines()
+    assert lines[0] == ",".join(COLUMNS) and len(lines) == 5
+    assert lines[4].split(",")[COLUMNS.index("time_total_s")] == ""  # None is an empty cell
+
+
+def test_plots_against_k_are_written_as_png_and_svg(tmp_path: Path) -> None:
+    rows = [_row(k, s, BenchStatus.SOLVED, 0.01 * k + s, 100 * k, 2) for k in (10, 50, 200) for s in (0, 1)]
+    rows.append(_row(200, 2, BenchStatus.TIMEOUT, None))
+    written = write_plots(rows, tmp_path, hard_limit_s=12.0)
+    assert [p.name for p in written] == ["time_vs_samples.png", "time_vs_samples.svg"]  # one vertex count
+    assert written[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    svg = written[1].read_text(encoding="utf-8")
+    assert "<svg" in svg and "planning time (s)" in svg
+    assert plot_scaling(rows[:2], SAMPLES, tmp_path / "none") is None  # a single K: no figure
+
+
+def _scaling_module():
+    spec = importlib.util.spec_from_file_location("scaling", REPO / "benchmarks" / "scaling.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("n", [4, 5, 9, 12])
+def test_scaling_polygons_are_regular_and_load_as_scenarios(n: int) -> None:
+    scaling = _scaling_module()
+    text = scaling.polygon_scenario(n)
+    sc = load_scenario_string(text, name=f"polygon-{n}")
+    assert sc.name == f"polygon-{n:02d}" and sc.world.object.n == n
+    pts = scaling.regular_polygon(n)
+    sides = [math.dist(pts[i], pts[(i + 1) % n]) for i in range(n)]
+    assert max(sides) - min(sides) < 1e-3
+    assert min(p[1] for p in pts) == 0 and pts[0][1] == pts[1][1] == 0  # resting on its first edge
+    ours, pick = tomllib.loads(text), tomllib.loads(PICK.read_text(encoding="utf-8"))
+    for table in ("environment", "gripper", "friction", "task"):  # only the object differs
+        assert ours[table] == pick[table]
