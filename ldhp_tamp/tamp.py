@@ -182,6 +182,7 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
         stream_stats = StreamStats()
         blame: Counter[Transition] = Counter()
         paths = pose_paths(ctx, planned, domain.info, REGISTRY, rng, stream_stats)
+        seen_paths: set[bytes] = set()
         tried = 0
         while tried < options.pose_paths_per_plan:
             ts = time.perf_counter()
@@ -189,6 +190,10 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
             clock.streams += time.perf_counter() - ts
             if path is None:
                 break
+            key = b"".join(seg.primitive.encode() + np.asarray(seg.poses).tobytes() for seg in path.segments)
+            if key in seen_paths:
+                continue  # the streams can reach the same path twice (e.g. via an in-state alignment)
+            seen_paths.add(key)
             tried += 1
             c.pose_paths += 1
             outcome = _bottom_tier(grasp_planner, path, l_max, c, clock)
@@ -254,6 +259,7 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
     """Grasp planning with dichotomy refinement (Algorithm 1's inner loop)."""
     segments = list(path.segments)
     refinements = 0
+    last_failing: Segment | None = None
     while True:
         t0 = time.perf_counter()
         res = planner.plan(PosePath(tuple(segments)))
@@ -266,12 +272,18 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         k = res.failing_segment
         seg = segments[k] if k is not None and 0 <= k < len(segments) else segments[-1]
         target = _refinement_target(segments, k)
-        if target is not None and refinements < l_max:
+        # A bisection that leaves the failure on the very same (unsplit) segment did not
+        # help; bisecting further before it rarely does (Task 1: the lift after a tip
+        # that stops at the goal angle fails however finely the tip is cut). Stop early.
+        stuck = last_failing is not None and seg is last_failing and not seg.refinable
+        last_failing = seg
+        if target is not None and refinements < l_max and not stuck:
             segments[target:target + 1] = list(segments[target].split())
             refinements += 1
             c.refinements += 1
             continue
         why = res.reason if res.reason.startswith("bottom tier") else f"bottom tier: {res.reason}"
         if refinements:
-            why += f" (after {refinements} dichotomy refinement(s))"
+            why += f" (after {refinements} dichotomy refinement(s)" + (
+                "; the last left the failure where it was)" if stuck else ")")
         return _BottomOutcome(segment=seg, reason=why)
