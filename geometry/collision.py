@@ -33,7 +33,6 @@ batch of one. Widths are scalars or ``(B,)`` arrays.
 
 from __future__ import annotations
 
-import functools
 import logging
 import weakref
 from dataclasses import dataclass
@@ -44,7 +43,7 @@ from numpy.typing import ArrayLike
 from shapely.geometry.polygon import orient
 
 from geometry.poses import BoolArray, transform_points
-from geometry.shapes import FloatArray, Polygon, segment_distances
+from geometry.shapes import FloatArray, Polygon
 from geometry.tolerances import PENETRATION_TOL
 from geometry.world import Environment, Gripper, PolylineGripper, TwoPointGripper, World
 
@@ -99,14 +98,6 @@ class ErodedShape:
     @property
     def is_empty(self) -> bool:
         return not self.parts
-
-    @functools.cached_property
-    def segments(self) -> FloatArray:
-        """(S, 2, 2) boundary segments of every part (an erosion of a simple polygon
-        has no holes, so the exteriors are the whole boundary)."""
-        if not self.parts:
-            return np.empty((0, 2, 2))
-        return np.concatenate([np.stack([c, np.roll(c, -1, axis=0)], axis=1) for c in self.parts])
 
 
 _POLYGON_CACHE: "weakref.WeakKeyDictionary[Polygon, dict[float, ErodedShape]]" = weakref.WeakKeyDictionary()
@@ -232,12 +223,8 @@ def _circles_vs_geometry(centres: FloatArray, radius: float, target: ErodedShape
     t = target.tol
     if radius < t or target.is_empty or centres.size == 0:
         return np.zeros(shape, dtype=bool)
-    # distance to the eroded target <= r - t: inside it, or near its boundary (closed
-    # form over the boundary segments; building shapely points costs more than this)
-    pts = centres.reshape(-1, 2)
-    inside = shapely.contains_xy(target.geometry, pts[:, 0], pts[:, 1])
-    near = segment_distances(pts, target.segments)[0].min(axis=1) <= radius - t
-    return (inside | near).reshape(shape)
+    pts = shapely.points(centres.reshape(-1, 2))
+    return shapely.dwithin(target.geometry, pts, radius - t).reshape(shape)
 
 
 # --------------------------------------------------------------------------------------
