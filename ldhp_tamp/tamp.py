@@ -58,6 +58,7 @@ class SolveOptions:
     emit_pddl: Path | None = None
     pose_paths_per_plan: int = 3
     stream_samples: int = 3
+    domain: Path | None = None  # a .pddl file used instead of the scenario's domain (ablate)
 
 
 @dataclass
@@ -134,7 +135,8 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     rng = np.random.default_rng(seed)
     say = progress or (lambda _msg: None)
 
-    domain = symbolic.load_domain(settings.domain_path or settings.domain)
+    domain = symbolic.load_domain(options.domain if options.domain is not None
+                                  else settings.domain_path or settings.domain)
     check_against_domain(domain.info, REGISTRY)
     world = scenario.world
 
