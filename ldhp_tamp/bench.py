@@ -271,9 +271,8 @@ def solve_run(spec: RunSpec) -> BenchRow:
     result = solve(scenario, SolveOptions(**knobs))
     plan = result.plan
     stats = plan.stats
-    values = {s.value for s in BenchStatus}
-    status = BenchStatus(result.status.value) if result.status.value in values else BenchStatus.FAILED
     times = stats.time_s
+    status = _status(result.status.value, times.get("total"), spec.timeout_s)
     return _row(spec, status, result.reason or (plan.reason or ""), time.perf_counter() - start,
                 time_total_s=times.get("total"), time_setup_s=times.get("setup"),
                 time_symbolic_s=times.get("symbolic"), time_streams_s=times.get("streams"),
@@ -282,6 +281,17 @@ def solve_run(spec: RunSpec) -> BenchRow:
                 feasibility_checks=stats.feasibility_checks, contact_state_nodes=stats.contact_state_nodes,
                 grasp_graph_nodes=stats.grasp_graph_nodes, grasp_graph_edges=stats.grasp_graph_edges,
                 top_iterations=stats.top_iterations, refinements=stats.refinements)
+
+
+def _status(solve_status: str, total_s: float | None, timeout_s: float | None) -> BenchStatus:
+    """The row status of a solve that returned: its own (``solved``, ``failed``, or
+    ``timeout`` if the planner has one); a failure at or past the time limit is a
+    ``timeout`` (the planner gave up on its time budget, or would have been stopped)."""
+    values = {s.value for s in BenchStatus}
+    status = BenchStatus(solve_status) if solve_status in values else BenchStatus.FAILED
+    if status is BenchStatus.FAILED and timeout_s is not None and total_s is not None and total_s >= timeout_s:
+        return BenchStatus.TIMEOUT
+    return status
 
 
 def _on_sigterm(signum: int, _frame: Any) -> None:

@@ -3,14 +3,16 @@
 
 matplotlib is imported when a figure is drawn, with the ``Agg`` backend (no display).
 Each figure has two panels: the solve time (``time_total_s``) and the number of
-feasibility checks, both on log scales; a line joins the medians over seeds of solved
-runs, dots are single solved runs, crosses runs that were not solved (failed at the time
-shown, or stopped by the time limit, drawn at the limit).
+feasibility checks, each on a log scale when its values span more than a factor 10. A
+line joins the medians over seeds of solved runs, dots are single solved runs, crosses
+runs that were not solved (failed at the time shown, or stopped by the time limit, drawn
+at the limit). The x axis is logarithmic for K, linear for the vertex count.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import os
 import statistics
 from collections.abc import Sequence
@@ -35,15 +37,17 @@ class Axis:
     series: tuple[str, ...]
     stem: str
     title: str
+    log_x: bool = True
 
 
 SAMPLES = Axis("samples_per_edge", "K, grasp samples per object edge", ("scenario", "engine"),
                "time_vs_samples", "Cost against the grasp sampling density K")
 VERTICES = Axis("object_vertices", "object vertices (regular polygon)", ("engine", "samples_per_edge"),
-                "time_vs_vertices", "Cost against the object's complexity")
+                "time_vs_vertices", "Cost against the object's complexity", log_x=False)
 
-_PANELS = (("time_total_s", "planning time (s), log scale"),
-           ("feasibility_checks", "feasibility checks, log scale"))
+_PANELS = (("time_total_s", "planning time (s)"), ("feasibility_checks", "feasibility checks"))
+#: A panel's y axis is logarithmic when its values span more than this factor.
+_LOG_SPAN = 10.0
 
 
 def _label(row: BenchRow, fields: Sequence[str]) -> str:
@@ -52,6 +56,22 @@ def _label(row: BenchRow, fields: Sequence[str]) -> str:
         v = getattr(row, f)
         parts.append(f"K={v}" if f == "samples_per_edge" else str(v))
     return ", ".join(parts)
+
+
+def _short(y: float) -> str:
+    """Tick label: 0.3, 2, 60k, 1.2M (no powers of ten)."""
+    if y >= 1e6:
+        return f"{y / 1e6:g}M"
+    if y >= 1e3:
+        return f"{y / 1e3:g}k"
+    return f"{y:g}"
+
+
+def _minor_label(y: float, _pos: int) -> str:
+    """Label the minor ticks 2x and 5x a power of ten, so a log axis reads without
+    powers of ten and without crowding."""
+    mantissa = y / 10 ** math.floor(math.log10(y) + 1e-9)
+    return _short(y) if round(mantissa) in (2, 5) and abs(mantissa - round(mantissa)) < 1e-6 else ""
 
 
 def plot_scaling(rows: Sequence[BenchRow], axis: Axis, out_dir: str | os.PathLike[str],
@@ -69,7 +89,7 @@ def plot_scaling(rows: Sequence[BenchRow], axis: Axis, out_dir: str | os.PathLik
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter
+    from matplotlib.ticker import FuncFormatter, NullFormatter
 
     series: dict[str, list[BenchRow]] = {}
     for r in rows:
@@ -77,6 +97,7 @@ def plot_scaling(rows: Sequence[BenchRow], axis: Axis, out_dir: str | os.PathLik
     fig, panels = plt.subplots(1, len(_PANELS), figsize=(11, 4.4), constrained_layout=True)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     markers = "osD^vP*X"
+    drawn: dict[str, list[float]] = {metric: [] for metric, _ in _PANELS}
     for i, (name, rs) in enumerate(sorted(series.items())):
         colour, marker = colours[i % len(colours)], markers[i % len(markers)]
         for ax, (metric, _ylabel) in zip(panels, _PANELS):
@@ -100,16 +121,27 @@ def plot_scaling(rows: Sequence[BenchRow], axis: Axis, out_dir: str | os.PathLik
                     bad.append((getattr(r, axis.field), y))
             if bad:
                 ax.scatter(*zip(*bad), color=colour, marker="x", s=45, zorder=4)
-    for ax, (_metric, ylabel) in zip(panels, _PANELS):
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+            drawn[metric] += [getattr(r, metric) for r in solved] + [y for _x, y in bad]
+    plain = FuncFormatter(lambda y, _pos: _short(y))
+    for ax, (metric, ylabel) in zip(panels, _PANELS):
+        if axis.log_x:
+            ax.set_xscale("log")
         ticks = sorted(xs)
         ax.set_xticks(ticks, [str(t) for t in ticks])
-        ax.xaxis.set_minor_formatter(NullFormatter())  # the runs' K values only
+        ax.xaxis.set_minor_formatter(NullFormatter())  # the runs' x values only
+        ys = [y for y in drawn[metric] if y > 0]
+        if ys and max(ys) > _LOG_SPAN * min(ys):
+            ax.set_yscale("log")
+            ylabel += ", log scale"
+            ax.yaxis.set_minor_formatter(FuncFormatter(_minor_label))
+            ax.tick_params(axis="y", which="minor", labelsize=7)
+            ax.grid(True, which="minor", axis="y", alpha=0.12)
+        else:
+            ax.set_ylim(bottom=0)
+        ax.yaxis.set_major_formatter(plain)
         ax.set_xlabel(axis.label)
         ax.set_ylabel(ylabel)
         ax.grid(True, which="major", alpha=0.35)
-        ax.grid(True, which="minor", axis="y", alpha=0.12)
     handles, labels = panels[0].get_legend_handles_labels()
     if any(r.status is not BenchStatus.SOLVED for r in rows):
         handles.append(plt.Line2D([], [], color="grey", marker="x", linestyle="none"))

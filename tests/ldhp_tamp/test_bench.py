@@ -177,3 +177,24 @@ def test_scaling_polygons_are_regular_and_load_as_scenarios(n: int) -> None:
     ours, pick = tomllib.loads(text), tomllib.loads(PICK.read_text(encoding="utf-8"))
     for table in ("environment", "gripper", "friction", "task"):  # only the object differs
         assert ours[table] == pick[table]
+
+
+def test_a_solve_that_fails_past_the_time_limit_counts_as_a_timeout() -> None:
+    from ldhp_tamp.bench import _status
+
+    assert _status("solved", 9.0, 5.0) is BenchStatus.SOLVED  # it made it: solved
+    assert _status("failed", 9.0, 5.0) is BenchStatus.TIMEOUT
+    assert _status("failed", 1.0, 5.0) is BenchStatus.FAILED
+    assert _status("failed", 9.0, None) is BenchStatus.FAILED
+    assert _status("timeout", 5.0, 5.0) is BenchStatus.TIMEOUT
+
+
+def test_bench_plots_flag_draws_time_against_k(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "k"
+    assert main(["bench", str(PICK), "--samples", "10,25", "--plots", "--out", str(out), "-q"]) == EXIT_OK
+    stdout = capsys.readouterr().out
+    assert "| example-pick | pyperplan | 10 | 1 | 1 | 100%" in stdout
+    assert "| example-pick | pyperplan | 25 | 1 | 1 | 100%" in stdout
+    for name in ("time_vs_samples.png", "time_vs_samples.svg"):
+        assert (out / name).stat().st_size > 1000 and name in stdout
+    assert not (out / "time_vs_vertices.png").exists()  # one object: no vertex figure
