@@ -1118,6 +1118,26 @@ def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray,
     return fingers, allc, com
 
 
+def _spread_order(n: int) -> IntArray:
+    """0..n-1 ordered coarse to fine: the two ends, the middle, the quarters, ... (each
+    index once), so that the first chunks of a path's samples cover all of it."""
+    if n <= 2:
+        return np.arange(n, dtype=np.int64)
+    out = [0, n - 1]
+    seen = {0, n - 1}
+    step = n - 1
+    while step > 1:
+        half = step / 2.0
+        for k in np.arange(half, n - 1, step):
+            i = int(round(k))
+            if i not in seen:
+                seen.add(i)
+                out.append(i)
+        step = half
+    out.extend(i for i in range(n) if i not in seen)
+    return np.asarray(out, dtype=np.int64)
+
+
 def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidates: ArrayLike,
                        options: MotionCheckOptions | None = None, *, max_checks: int | None = None) -> MotionGrasps:
     """``G_m``: the grasps that can execute a MoveObject segment, with their quality.
@@ -1167,22 +1187,24 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     cand = cand[(cand != NO_CONTACT) & (grasps.n_touching[cand] >= 1)]
     n_s = p.shape[0]
 
-    # (a) collision-free at every sample.
-    if cand.size:
-        wp = compose_batch(p[None, :, :], grasps.gripper[cand][:, None, :])
-        hit = _env_overlap(world, wp.reshape(-1, 3), np.repeat(grasps.width[cand], n_s), opts.tol)
-        cand = cand[~hit.reshape(cand.size, n_s).any(axis=1)]
-
-    # (b) + (c) feasibility, sample chunk by sample chunk, pruning failures.
+    # (a) collision-free and (b) + (c) feasible at every sample: chunk by chunk of samples
+    # spread over the path (ends and middle first), pruning the candidates that fail
+    # either test before the next chunk, so that most failures cost a few samples.
     env = _env_contacts(world, p, opts.contact_tol) if cand.size else None
     length = world.object.length_scale
     alive = cand
     checks = 0
     truncated = False
+    order = _spread_order(n_s)
     for start in range(0, n_s, opts.chunk):
         if not alive.size:
             break
-        samples = np.arange(start, min(start + opts.chunk, n_s))
+        samples = order[start:start + opts.chunk]
+        wp = compose_batch(p[samples][None, :, :], grasps.gripper[alive][:, None, :])
+        hit = _env_overlap(world, wp.reshape(-1, 3), np.repeat(grasps.width[alive], samples.size), opts.tol)
+        alive = alive[~hit.reshape(alive.size, samples.size).any(axis=1)]
+        if not alive.size:
+            break
         if max_checks is not None and checks + alive.size * samples.size > max_checks:
             keep = max(0, (max_checks - checks) // samples.size)
             truncated = True
