@@ -48,7 +48,6 @@ import os
 import platform
 import signal
 import statistics
-import sys
 import time
 import traceback
 from collections import deque
@@ -68,10 +67,14 @@ __all__ = [
     "BenchRow",
     "BenchStatus",
     "RunSpec",
+    "COLUMNS",
+    "format_csv",
+    "format_json",
     "format_summary",
     "plan_runs",
     "run_all",
     "run_bench",
+    "solve_run",
     "solver_has_timeout",
     "write_results",
 ]
