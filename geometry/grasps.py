@@ -994,14 +994,18 @@ class MotionCheckOptions:
         Bisection steps of the reaction angle (:func:`geometry.mechanics.reaction_angle_batch`).
     chunk : int
         Samples per batched feasibility call; grasps failing a chunk skip the later ones.
+    alpha_samples : int
+        Samples (spread coarse to fine over the segment, ends first) over which the
+        reaction angle alpha is averaged: it ranks feasible grasps, it decides nothing.
     """
 
     tol: float = PENETRATION_TOL
     contact_tol: float = CONTACT_TOL
     w1: float = 1.0
     w2: float = 1.0
-    angle_iterations: int = 16
+    angle_iterations: int = 12
     chunk: int = 8
+    alpha_samples: int = 8
 
     def __post_init__(self) -> None:
         if self.chunk < 1 or self.angle_iterations < 0 or self.tol < 0 or self.contact_tol < 0:
@@ -1157,7 +1161,8 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     The quality of an admissible grasp is ``S = w1 s + w2 alpha`` as in
     :func:`geometry.mechanics.grasp_quality`, batched over grasps: ``s = 0`` iff the
     finger contacts alone are force closure (invariant under the rigid motion, so tested
-    once in the object frame), ``alpha`` the mean over the samples of
+    once in the object frame), ``alpha`` the mean over ``alpha_samples`` samples spread over
+    the segment (its ends first) of
     :func:`geometry.mechanics.reaction_angle_batch`.
 
     Parameters
@@ -1220,10 +1225,11 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     # Quality of the admissible grasps.
     if alive.size:
         assert env is not None
-        fingers, allc, com = _instances(world, grasps, alive, p, env, np.arange(n_s))
-        closure = mechanics.force_closure_batch(fingers.select(slice(None, None, n_s)), com[::n_s], length)
+        at = np.sort(order[:max(1, opts.alpha_samples)])
+        fingers, allc, com = _instances(world, grasps, alive, p, env, at)
+        closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)
         ang = mechanics.reaction_angle_batch(allc, com, length, iterations=opts.angle_iterations)
-        ang = ang.reshape(alive.size, n_s)
+        ang = ang.reshape(alive.size, at.size)
         fin = np.isfinite(ang)  # all of them: the samples passed the same feasibility test
         alpha = np.where(fin, ang, 0.0).sum(axis=1) / np.maximum(fin.sum(axis=1), 1)
     else:

@@ -85,7 +85,7 @@ class _Swept:
                 continue
             for pose in ctx.witness_poses(state):
                 for motion, s_max, _ in self.families(ctx, pose):
-                    sw = sweep(ctx.world, motion, s_max, step_mm=TRANSITION_STEP_MM, refine_bits=16)
+                    sw = sweep(ctx.world, motion, s_max, step_mm=TRANSITION_STEP_MM, refine_bits=10)
                     pairs |= _consecutive_pairs(sw)
         return pairs
 

@@ -436,9 +436,16 @@ def test_lift_in_the_air_needs_a_pinch() -> None:
 def test_quality_matches_the_mechanics_definition() -> None:
     world, gs = lift_world()
     path = straight([0, 0, 0], [0, 20, 0])  # lifting off the table: l1-e1 separates
-    res = motion_conditioned(world, gs, path, candidates(world, gs, path))
+    # alpha over every sample at full bisection precision: the mechanics' definition
+    full = MotionCheckOptions(alpha_samples=len(path), angle_iterations=16)
+    res = motion_conditioned(world, gs, path, candidates(world, gs, path), full)
     assert len(res) > 3
     assert np.allclose(res.quality, (~res.force_closure) + res.alpha)
+    # the default averages fewer samples at a coarser precision: the same grasps, close values
+    fast = motion_conditioned(world, gs, path, candidates(world, gs, path))
+    assert np.array_equal(fast.indices, res.indices)
+    assert np.array_equal(fast.force_closure, res.force_closure)
+    assert np.allclose(fast.alpha, res.alpha, atol=0.05)
     for k in np.linspace(0, len(res) - 1, 4).astype(int):
         g = int(res.indices[k])
         fingers, motion, com = one_grasp_contacts(world, gs, g, path)
@@ -447,7 +454,7 @@ def test_quality_matches_the_mechanics_definition() -> None:
         assert q.force_closure == res.force_closure[k]
         assert math.isclose(q.value, res.quality[k], rel_tol=1e-9, abs_tol=1e-12)
     # Weights.
-    w = motion_conditioned(world, gs, path, res.indices, MotionCheckOptions(w1=10.0, w2=0.0))
+    w = motion_conditioned(world, gs, path, res.indices, MotionCheckOptions(w1=10.0, w2=0.0, alpha_samples=len(path)))
     assert np.array_equal(w.indices, res.indices)
     assert np.allclose(w.quality, 10.0 * ~res.force_closure)
 
