@@ -1,14 +1,17 @@
 """The ``ldhp-tamp`` command line. The only place that turns errors into exit codes.
 
 Exit status: 0 solved (or valid), 1 no plan found (or invalid plan), 2 bad input or
-usage. Anything else is a bug. Logs go to stderr; results to stdout or files.
+usage, 70 an unexpected exception (a bug, reported with its traceback; never mapped to
+0, 1 or 2). Logs go to stderr; results to stdout or files.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
+import traceback
 from typing import Callable, Sequence
 
 from ldhp_tamp.errors import InputError
@@ -18,11 +21,13 @@ log = logging.getLogger("ldhp_tamp")
 EXIT_OK = 0
 EXIT_NO_PLAN = 1
 EXIT_BAD_INPUT = 2
+EXIT_BUG = 70  #: EX_SOFTWARE of sysexits.h: an unexpected exception, i.e. a bug
 
 EXIT_CODES_HELP = """exit status:
-  0  solved (or the plan is valid)
-  1  no plan found (or the plan is invalid)
-  2  bad input or usage (the message names the file and the problem)
+  0   solved (or the plan is valid)
+  1   no plan found (or the plan is invalid)
+  2   bad input or usage (the message names the file and the problem)
+  70  a bug: an unexpected exception (its traceback is printed; please report it)
 """
 
 
@@ -91,10 +96,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
     scenario = load_scenario(args.scenario)
     out = Path(args.out) if args.out else Path(f"{scenario.name}-plan.json")
-    options = SolveOptions(engine=args.engine, seed=args.seed,
+    if not out.resolve().parent.is_dir():  # before the search, not after it
+        raise InputError(f"{out}: --out: no such directory: {out.resolve().parent}")
+    options = SolveOptions(engine=args.engine, seed=args.seed, timeout=args.timeout,
                            emit_pddl=Path(args.emit_pddl) if args.emit_pddl else None)
-    if options.emit_pddl is not None:
-        options.emit_pddl.mkdir(parents=True, exist_ok=True)
     quiet = args.quiet
 
     def progress(msg: str) -> None:
@@ -102,7 +107,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
             print(f"[ldhp-tamp] {msg}", file=sys.stderr, flush=True)
 
     result = solve(scenario, options, progress=progress)
-    write_plan(result.plan, out)
+    try:
+        write_plan(result.plan, out)
+    except OSError as exc:
+        raise InputError(f"{out}: --out: cannot write the plan: {exc.strerror or exc}") from exc
     stats = result.plan.stats
     times = ", ".join(f"{k} {v:.2f} s" for k, v in stats.time_s.items())
     print(f"{result.status.value}: {scenario.name} -> {out}")
@@ -117,6 +125,16 @@ def cmd_solve(args: argparse.Namespace) -> int:
           f"refinements: {stats.refinements}, feasibility checks: {stats.feasibility_checks}")
     print(f"  time: {times}")
     return EXIT_OK if result.solved else EXIT_NO_PLAN
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
 
 
 def _comma_names(text: str) -> tuple[str, ...]:
@@ -183,9 +201,30 @@ def cmd_ablate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_render(args: argparse.Namespace) -> int:
+    """Draw a plan's figures (snapshots, animation, contact-state graph) into a folder.
+    Exit 0 when the figures were written, also for a plan without steps (a failed solve:
+    the task and the graph are drawn, without a path)."""
+    from ldhp_tamp.render import RenderOptions, render_files
+
+    try:
+        options = RenderOptions(max_frames=args.max_frames, dpi=args.dpi)
+    except ValueError as exc:
+        raise InputError(f"render options: {exc}") from None
+    figures = render_files(args.plan, args.scenario, args.out, options)
+    if figures.task_only:
+        print(f"note: {args.plan} has no waypoint: drew the task (start, goal) and the graph without a path",
+              file=sys.stderr)
+    print(f"wrote {figures.out_dir}: snapshots ({figures.panels} panel{'s' if figures.panels != 1 else ''}), "
+          f"animation ({figures.frames} frame{'s' if figures.frames != 1 else ''}), contact-state graph")
+    for path in figures.paths:
+        print(f"  {path}")
+    return EXIT_OK
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "check": cmd_check, "validate": cmd_validate, "solve": cmd_solve, "bench": cmd_bench,
-    "ablate": cmd_ablate}
+    "ablate": cmd_ablate, "render": cmd_render}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -220,6 +259,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--engine", metavar="NAME", help="unified-planning engine (default: the scenario's, pyperplan)")
     p.add_argument("--seed", type=int, metavar="N", help="random seed (default: the scenario's)")
     p.add_argument("--emit-pddl", metavar="DIR", help="write the domain and one problem per top-tier iteration")
+    p.add_argument("--timeout", type=_seconds, metavar="SECONDS",
+                   help="wall-time budget of the whole solve (both tiers, every engine); when it runs "
+                        "out the plan has status 'failed', a reason starting 'timeout' and the "
+                        "statistics so far, and the exit status is 1 (default: no limit)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
 
     p = sub.add_parser("bench", help="benchmark: every scenario x engine x K x seed, in worker processes",
@@ -271,6 +314,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=1, metavar="J", help="solves at once, in worker processes (default 1)")
     p.add_argument("--keep-domains", metavar="DIR", help="write the domain copies here and keep them")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
+
+    p = sub.add_parser("render", help="draw a plan's figures: snapshots, animation, contact-state graph",
+                       description="Draw paper-style figures from a plan file and its scenario alone:\n"
+                                   "snapshots.png/.svg (a panel per step), animation.gif (the whole plan)\n"
+                                   "and contact_graph.png/.svg (the contact states, the admissible\n"
+                                   "MoveObject transitions by primitive, the plan's path). A plan without\n"
+                                   "steps (a failed solve) is drawn as the task. See docs/figures.md.",
+                       epilog="exit status:\n  0  the figures were written (also for a failed plan)\n"
+                              "  2  bad input or usage: unreadable or malformed plan or scenario, a plan "
+                              "made for\n     another scenario, an unwritable folder; nothing is written\n",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("plan", metavar="PLAN", help="plan JSON file (ldhp-plan/1)")
+    p.add_argument("--scenario", required=True, metavar="SCENARIO", help="the scenario TOML file")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: <plan stem>-figures next to the plan)")
+    p.add_argument("--max-frames", type=int, default=150, metavar="N",
+                   help="at most N animation frames (default 150)")
+    p.add_argument("--dpi", type=int, default=150, metavar="N", help="resolution of the PNG figures (default 150)")
     return parser
 
 
@@ -286,12 +346,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return COMMANDS[args.command](args)
     except InputError as exc:
         if args.debug:
-            raise
+            traceback.print_exc()
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a bug: never let it pass for "no plan" (1) or "bad input" (2)
+        traceback.print_exc()
+        print(f"ldhp-tamp: internal error (a bug): {type(exc).__name__}: {exc}", file=sys.stderr)
+        return EXIT_BUG
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -43,3 +43,16 @@ class EngineError(InputError):
 
 class PlanFormatError(InputError):
     """A plan file that does not follow ``ldhp-plan/1``."""
+
+
+class TimeBudgetExceeded(LdhpError):
+    """A solve's time budget ran out (``--timeout``); ``where`` says in which stage.
+
+    Raised deep in the search (:mod:`ldhp_tamp.budget`), caught by
+    :func:`ldhp_tamp.tamp.solve`, which answers with a failed result whose reason starts
+    with ``timeout``. It is not an :class:`InputError` and never reaches the CLI.
+    """
+
+    def __init__(self, where: str):
+        self.where = where
+        super().__init__(f"time budget exceeded in {where}")

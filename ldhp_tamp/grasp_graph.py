@@ -60,6 +60,7 @@ from geometry.poses import BoolArray, IntArray, Pose, compose_batch, transform_p
 from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS
 from geometry.world import GripperState, PolylineGripper, World
+from ldhp_tamp import budget
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import Step, Waypoint
 from ldhp_tamp.primitives.adjust_grasp import (
@@ -483,14 +484,26 @@ class GraspPlanner:
 
     # ---- the solve ---------------------------------------------------------------------
 
-    def plan(self, path: PosePath) -> GraspPlanResult:
+    def plan(self, path: PosePath, *, deadline: float | None = None) -> GraspPlanResult:
         """Find the cheapest grasp sequence along ``path`` (see the module docstring).
+
+        Parameters
+        ----------
+        path : PosePath
+        deadline : float or None
+            A :func:`time.perf_counter` value; checked before each G_m and each search
+            round. ``None``: no limit.
 
         Returns
         -------
         GraspPlanResult
             SOLVED with the plan's steps, or NO_GRASP_FOR_SEGMENT / NO_PATH with the
             failing segment and a reason. Never raises for an infeasible path.
+
+        Raises
+        ------
+        TimeBudgetExceeded
+            When ``deadline`` has passed.
         """
         t_start = time.perf_counter()
         timings: dict[str, float] = {}
@@ -523,6 +536,7 @@ class GraspPlanner:
         checks = 0
         motion_sizes = []
         for k, seg in enumerate(segments):
+            budget.check(deadline, "the bottom tier, computing the grasp sets G_m")
             mg, n_cand, fresh = self.motion_grasps(seg)
             if fresh:
                 checks += mg.checks
@@ -551,7 +565,7 @@ class GraspPlanner:
 
         # The lazy shortest-path search.
         t0 = time.perf_counter()
-        node_path, edge_path, reach, exhausted = self._search(ctx, layers, inter, cands, search)
+        node_path, edge_path, reach, exhausted = self._search(ctx, layers, inter, cands, search, deadline)
         timings["search"] = time.perf_counter() - t0
         checks += search.checks
         nodes = sum(layer.size for layer in layers)
@@ -616,7 +630,8 @@ class GraspPlanner:
     # ---- the lazy shortest-path search -------------------------------------------------
 
     def _search(self, ctx: AdjustContext, layers: list[_Layer], inter: list[FloatArray], cands: list[list[_Cands]],
-                search: _Search) -> tuple[list[tuple[int, int]] | None, list[Any], list[FloatArray], bool]:
+                search: _Search, deadline: float | None = None
+                ) -> tuple[list[tuple[int, int]] | None, list[Any], list[FloatArray], bool]:
         """LazySP over the layered graph (see :func:`_optimistic`): returns (the node path
         or None, its edges, the optimistic cost-to-come per layer -- unchecked edges
         counted as feasible --, whether the check budget ran out)."""
@@ -626,6 +641,7 @@ class GraspPlanner:
         exhausted = False
         while True:
             search.rounds += 1
+            budget.check(deadline, "the bottom tier's grasp-graph search")
             fwd, bwd = _optimistic(layers, inter, lg, start, self.goal_release, opts.max_intra_depth)
             best = float(bwd[0][-1][start])
             if not math.isfinite(best):

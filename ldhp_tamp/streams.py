@@ -24,6 +24,7 @@ import numpy as np
 from geometry.features import ContactState
 from geometry.kinematics import Motion, MotionKind, SweepEnd, sweep
 from geometry.poses import Pose, wrap_angle
+from ldhp_tamp import budget
 from ldhp_tamp.contact_graph import PlanningContext
 from ldhp_tamp.path import Segment
 from ldhp_tamp.primitives.registry import DomainInfo, Family, PrimitiveRegistry, Transition
@@ -200,12 +201,15 @@ def _candidates(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveReg
 
 def pose_paths(ctx: PlanningContext, transitions: Sequence[Transition], domain: DomainInfo,
                registry: PrimitiveRegistry, rng: np.random.Generator, stats: StreamStats, *,
-               limit: int | None = None, max_expansions: int = 200) -> Iterator[PosePath]:
+               limit: int | None = None, max_expansions: int = 200,
+               deadline: float | None = None) -> Iterator[PosePath]:
     """Yield complete pose paths for a contact-state plan, best-ranked samples first.
 
     Depth-first over the stream samples of each transition (at most ``limit`` per
     transition, default ``ctx.stream_samples``), stopping after ``max_expansions``
-    sampled segments in all. Dead ends are counted in ``stats``.
+    sampled segments in all. Dead ends are counted in ``stats``. Past ``deadline`` (a
+    :func:`time.perf_counter` value) the next expansion raises
+    :class:`~ldhp_tamp.errors.TimeBudgetExceeded`.
     """
     limit = ctx.stream_samples if limit is None else limit
     n = len(transitions)
@@ -213,6 +217,7 @@ def pose_paths(ctx: PlanningContext, transitions: Sequence[Transition], domain: 
     def rec(k: int, pose: Pose, segments: tuple[Segment, ...]) -> Iterator[PosePath]:
         if stats.expansions >= max_expansions:
             return
+        budget.check(deadline, "the top tier's streams (object-pose paths)")
         if k == n:
             if not ctx.goal_free:
                 last_state = transitions[-1].to_state if n else ctx.start_state

@@ -28,6 +28,10 @@ import contextlib
 import enum
 import logging
 import os
+import pickle
+import re
+import select
+import signal
 import tempfile
 import threading
 import time
@@ -65,6 +69,7 @@ __all__ = [
     "Transition",
     "available_engines",
     "build_problem",
+    "check_engine",
     "emit_pddl",
     "load_domain",
     "parse_domain",
@@ -119,7 +124,7 @@ def available_engines() -> tuple[str, ...]:
                         if "[" not in n and factory.engine(n).is_oneshot_planner()))
 
 
-def _check_engine(domain: SymbolicDomain, engine: str) -> None:
+def check_engine(domain: SymbolicDomain, engine: str) -> None:
     """Refuse an unknown engine, or one that does not support the domain's features.
 
     Raises
@@ -129,7 +134,8 @@ def _check_engine(domain: SymbolicDomain, engine: str) -> None:
     """
     installed = available_engines()
     if engine not in installed:
-        raise EngineError(f"unknown planning engine {engine!r}; installed: {', '.join(installed)}")
+        raise EngineError(f"unknown planning engine {engine!r} for domain {domain.info.source}; "
+                          f"installed: {', '.join(installed)}")
     factory = _environment().factory
     kind = domain.kind
     if factory.engine(engine).supports(kind):
@@ -208,6 +214,7 @@ def parse_domain(text: str, source: str = "<string>") -> SymbolicDomain:
     DomainError
         Naming ``source``, and the line and column of a syntax error when known.
     """
+    _check_requirements(text, source)
     env = _environment()
     template = _parse(env, text, None, source)
     if template.has_fluent(_TOTAL_COST):
@@ -229,6 +236,44 @@ def parse_domain(text: str, source: str = "<string>") -> SymbolicDomain:
         template=template,
         kind=template.kind,
     )
+
+
+#: PDDL requirements a domain may declare: classical planning, STRIPS to ADL, with action
+#: costs. Whether the chosen engine supports what the domain uses is checked when it is
+#: chosen (:func:`check_engine`).
+SUPPORTED_REQUIREMENTS = frozenset({
+    ":strips", ":typing", ":negative-preconditions", ":disjunctive-preconditions", ":equality",
+    ":existential-preconditions", ":universal-preconditions", ":quantified-preconditions",
+    ":conditional-effects", ":adl", ":action-costs"})
+#: Requirements of PDDL 2.1 to 3.1 (and PPDDL, HDDL) outside that fragment, and why.
+_UNSUPPORTED_REQUIREMENTS = {
+    ":durative-actions": "temporal planning", ":duration-inequalities": "temporal planning",
+    ":continuous-effects": "temporal planning", ":timed-initial-literals": "temporal planning",
+    ":time": "temporal planning", ":numeric-fluents": "numeric planning", ":fluents": "numeric planning",
+    ":object-fluents": "object fluents", ":derived-predicates": "derived predicates",
+    ":preferences": "preferences", ":constraints": "trajectory constraints",
+    ":probabilistic-effects": "probabilistic planning", ":non-deterministic": "non-deterministic planning",
+    ":hierarchy": "hierarchical planning", ":method-preconditions": "hierarchical planning"}
+_REQUIREMENTS = re.compile(r"\(\s*:requirements\b([^()]*)\)", re.IGNORECASE)
+
+
+def _check_requirements(text: str, source: str) -> None:
+    """Refuse a requirement outside :data:`SUPPORTED_REQUIREMENTS`, naming its line.
+
+    unified-planning's reader ignores most requirements (and answers an unknown one
+    with a misleading "Expected ')'"), so they are read here first.
+    """
+    code = re.sub(r";[^\n]*", lambda m: " " * len(m.group()), text)  # comments out, offsets kept
+    for block in _REQUIREMENTS.finditer(code):
+        for word in re.finditer(r"\S+", block.group(1)):
+            req = word.group().lower()
+            if req in SUPPORTED_REQUIREMENTS:
+                continue
+            line = code.count("\n", 0, block.start(1) + word.start()) + 1
+            what = (f"unsupported PDDL requirement {req} ({_UNSUPPORTED_REQUIREMENTS[req]})"
+                    if req in _UNSUPPORTED_REQUIREMENTS else f"unknown PDDL requirement {word.group()}")
+            raise DomainError(f"{source}:{line}: {what}; the contact-state tier is classical "
+                              f"planning (supported: {' '.join(sorted(SUPPORTED_REQUIREMENTS))})")
 
 
 def _parse(env: Environment, domain_text: str, problem_text: str | None,
@@ -588,12 +633,17 @@ def solve(problem: SymbolicProblem, engine: str = DEFAULT_ENGINE,
         An entry of :func:`available_engines`: ``pyperplan`` (default),
         ``fast-downward``, their ``-opt`` variants, or any other installed engine.
     timeout_s
-        Passed to the engine; engines that cannot enforce it (pyperplan) say so in the log.
+        Wall-time limit of the engine call. It is enforced here, for every engine
+        (pyperplan ignores unified-planning's own timeout): the call runs in a forked
+        child process, killed with its process group when the limit passes (about 25 ms
+        of overhead per call; where there is no fork, the engine gets the limit as its own
+        timeout). ``None`` (default): no limit, and the engine runs in this process.
 
     Returns
     -------
     SymbolicResult
-        A failed solve is a status with a reason, not an exception.
+        A failed solve is a status with a reason, not an exception; a killed engine is
+        :attr:`SymbolicStatus.TIMEOUT`.
 
     Raises
     ------
@@ -601,33 +651,122 @@ def solve(problem: SymbolicProblem, engine: str = DEFAULT_ENGINE,
         Unknown engine (the message lists the installed ones), or an engine that does
         not support the domain, e.g. one that would ignore its action costs.
     """
-    _check_engine(problem.domain, engine)
-    factory = _environment().factory
+    check_engine(problem.domain, engine)
     start = time.perf_counter()
     try:
-        with _SOLVE_LOCK, _private_working_directory(), warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            with factory.OneshotPlanner(name=engine) as planner:
-                planner.skip_checks = True  # _check_engine checked the domain's kind
-                answer = planner.solve(problem.up_problem, timeout=timeout_s)
+        with _SOLVE_LOCK, _private_working_directory():
+            if timeout_s is None or not hasattr(os, "fork"):
+                answer = _run_engine(problem, engine, timeout_s)
+            else:
+                answer = _run_engine_in_child(problem, engine, timeout_s)
     except Exception as exc:  # any engine failure is a result, not a crash
         elapsed = time.perf_counter() - start
         log.warning("engine %s failed: %s", engine, exc)
         return SymbolicResult(SymbolicStatus.ERROR, (), f"engine {engine} failed: {exc}",
                               elapsed, engine)
     elapsed = time.perf_counter() - start
-    for w in caught:
-        log.info("engine %s: %s", engine, w.message)
+    for w in answer.warnings:
+        log.info("engine %s: %s", engine, w)
     return _result(problem, answer, engine, elapsed, timeout_s)
 
 
-def _result(problem: SymbolicProblem, answer: PlanGenerationResult, engine: str,
+@dataclass(frozen=True)
+class _Answer:
+    """What an engine call returns, reduced to picklable values (it may cross a process
+    boundary): the status, the plan's ``(action, argument names)`` (``None`` without a
+    plan), the engine's last log line and the warnings it raised."""
+
+    status: PlanGenerationResultStatus
+    actions: tuple[tuple[str, tuple[str, ...]], ...] | None
+    last_log: str
+    warnings: tuple[str, ...] = ()
+
+
+def _run_engine(problem: SymbolicProblem, engine: str, timeout_s: float | None) -> _Answer:
+    """Call the engine in this process (the caller holds the lock and the directory)."""
+    factory = _environment().factory
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with factory.OneshotPlanner(name=engine) as planner:
+            planner.skip_checks = True  # check_engine checked the domain's kind
+            answer = planner.solve(problem.up_problem, timeout=timeout_s)
+    actions = None if answer.plan is None else tuple(
+        (ai.action.name, tuple(p.object().name for p in ai.actual_parameters))
+        for ai in answer.plan.actions)
+    return _Answer(answer.status, actions, _last_log(answer), tuple(str(w.message) for w in caught))
+
+
+def _run_engine_in_child(problem: SymbolicProblem, engine: str, timeout_s: float) -> _Answer:
+    """:func:`_run_engine` in a forked child that sends its :class:`_Answer` back through a
+    pipe; killed, with the engine's own subprocesses (they share its process group), when
+    ``timeout_s`` passes. A bare :func:`os.fork` rather than :mod:`multiprocessing`: the
+    overhead per call is about 20 ms instead of 60 (see ``tests/ldhp_tamp/test_budget.py``)."""
+    if timeout_s <= 0:
+        return _Answer(PlanGenerationResultStatus.TIMEOUT, None, "no time left")
+    deadline = time.perf_counter() + timeout_s
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns
+        try:
+            os.close(read_end)
+            _engine_child(write_end, problem, engine, timeout_s)
+        finally:
+            os._exit(0)
+    os.close(write_end)
+    chunks: list[bytes] = []
+    finished = False
+    try:
+        while (left := deadline - time.perf_counter()) > 0:
+            ready, _, _ = select.select([read_end], [], [], left)
+            if not ready:
+                break
+            chunk = os.read(read_end, 1 << 16)
+            if not chunk:
+                finished = True
+                break
+            chunks.append(chunk)
+    finally:
+        os.close(read_end)
+        if not finished:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pid, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        _, wait_status = os.waitpid(pid, 0)
+    if not finished:
+        return _Answer(PlanGenerationResultStatus.TIMEOUT, None, f"killed after {timeout_s:.3g} s")
+    if not chunks:
+        raise RuntimeError(f"the engine's process died ({_exit_description(wait_status)})")
+    kind, payload = pickle.loads(b"".join(chunks))
+    if kind == "error":
+        raise RuntimeError(payload)
+    return payload
+
+
+def _exit_description(wait_status: int) -> str:
+    if os.WIFSIGNALED(wait_status):
+        return f"killed by signal {os.WTERMSIG(wait_status)}"
+    return f"exit status {os.waitstatus_to_exitcode(wait_status)}"
+
+
+def _engine_child(write_end: int, problem: SymbolicProblem, engine: str, timeout_s: float) -> None:
+    """The child's side of :func:`_run_engine_in_child`: one pickled answer on the pipe."""
+    os.setpgrp()  # its own process group, so that a kill reaches the engine's subprocesses
+    try:
+        message: tuple[str, object] = ("ok", _run_engine(problem, engine, timeout_s))
+    except BaseException as exc:  # reported to the parent, which returns an ERROR result
+        message = ("error", f"{type(exc).__name__}: {exc}")
+    with os.fdopen(write_end, "wb") as pipe:
+        pipe.write(pickle.dumps(message))
+
+
+def _result(problem: SymbolicProblem, answer: _Answer, engine: str,
             elapsed: float, timeout_s: float | None) -> SymbolicResult:
     status = _STATUS.get(answer.status, SymbolicStatus.ERROR)
     if status is SymbolicStatus.NOT_FOUND and engine in _EXHAUSTIVE_ENGINES:
         status = SymbolicStatus.UNSOLVABLE
-    if status is SymbolicStatus.SOLVED and answer.plan is not None:
-        actions = tuple(_ground(problem, ai) for ai in answer.plan.actions)
+    if status is SymbolicStatus.SOLVED and answer.actions is not None:
+        actions = tuple(_ground(problem, name, args) for name, args in answer.actions)
         moves = " ".join(f"-{a.name}-> {a.to_state.pddl_name}" for a in actions
                          if a.to_state is not None)
         reason = (f"{engine}: {len(actions)} action(s) from "
@@ -640,16 +779,16 @@ def _result(problem: SymbolicProblem, answer: PlanGenerationResult, engine: str,
         SymbolicStatus.UNSOLVABLE: _no_path(problem),
         SymbolicStatus.NOT_FOUND: f"{engine} found no plan (its search is incomplete): "
                                   + _no_path(problem),
-        SymbolicStatus.TIMEOUT: f"{engine} hit the time limit of {timeout_s} s",
+        SymbolicStatus.TIMEOUT: f"{engine} hit the time limit of {timeout_s or 0:.3g} s after "
+                                f"{elapsed:.3g} s",
         SymbolicStatus.MEMOUT: f"{engine} ran out of memory",
-    }.get(status, f"{engine} reported {answer.status.name}: {_last_log(answer)}")
+    }.get(status, f"{engine} reported {answer.status.name}: {answer.last_log}")
     log.info("%s", reason)
     return SymbolicResult(status, (), reason, elapsed, engine)
 
 
-def _ground(problem: SymbolicProblem, instance: up_model.ActionInstance) -> GroundAction:
-    info = problem.domain.info.action(instance.action.name)
-    args = tuple(p.object().name for p in instance.actual_parameters)
+def _ground(problem: SymbolicProblem, name: str, args: tuple[str, ...]) -> GroundAction:
+    info = problem.domain.info.action(name)
     if info.admissibility is None:
         return GroundAction(info.name, info.family, args)
     i, j = info.admissibility

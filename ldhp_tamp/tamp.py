@@ -27,8 +27,10 @@ from typing import Callable
 import numpy as np
 
 from geometry.grasps import GraspOptions, enumerate_grasps
-from ldhp_tamp import symbolic
+from ldhp_tamp import budget, symbolic
+from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
+from ldhp_tamp.errors import TimeBudgetExceeded
 from ldhp_tamp.grasp_graph import GraspPlanner, GraspPlanStatus
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
@@ -58,6 +60,9 @@ class SolveOptions:
     emit_pddl: Path | None = None
     pose_paths_per_plan: int = 3
     stream_samples: int = 3
+    timeout: float | None = None
+    """Wall-time budget of the whole solve in seconds (both tiers, every engine); when it
+    runs out the solve fails with a reason starting ``timeout``. ``None``: no limit."""
     domain: Path | None = None  # a .pddl file used instead of the scenario's domain (ablate)
 
 
@@ -126,6 +131,18 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     """
     clock = _Clock()
     c = _Counters()
+    try:
+        return _solve(scenario, options, progress, c, clock, Budget(options.timeout, clock.start).deadline)
+    except TimeBudgetExceeded as exc:
+        return _failed(scenario, options.engine or scenario.settings.engine,
+                       f"timeout: the {options.timeout:g} s budget ran out in {exc.where}; "
+                       f"{c.top_iterations} top-tier iteration(s), {c.pose_paths} pose path(s) tried", c, clock)
+
+
+def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], None] | None,
+           c: _Counters, clock: _Clock, deadline: float | None) -> SolveResult:
+    """:func:`solve` within a deadline (a :func:`time.perf_counter` value or ``None``);
+    raises :class:`TimeBudgetExceeded` when it passes."""
     settings = scenario.settings
     engine = options.engine or settings.engine
     h_max = options.max_top_iterations or settings.max_top_iterations
@@ -138,6 +155,7 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     domain = symbolic.load_domain(options.domain if options.domain is not None
                                   else settings.domain_path or settings.domain)
     check_against_domain(domain.info, REGISTRY)
+    symbolic.check_engine(domain, engine)
     world = scenario.world
 
     try:
@@ -150,6 +168,7 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
     grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release)
     clock.setup = time.perf_counter() - clock.start
+    budget.check(deadline, "the setup (contact-state graph, grasp enumeration)")
     say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
         f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 
@@ -157,6 +176,7 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     failures: list[str] = []
     for iteration in range(1, h_max + 1):
         c.top_iterations = iteration
+        budget.check(deadline, f"the top tier, before iteration {iteration}")
         # ---- top tier, step 2: contact-state plan -------------------------------------
         t0 = time.perf_counter()
         allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in forbidden)
@@ -170,8 +190,10 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
         problem = symbolic.build_problem(domain, graph, forbidden=frozenset(forbidden))
         if options.emit_pddl is not None:
             symbolic.emit_pddl(options.emit_pddl, problem, iteration)
-        sres = symbolic.solve(problem, engine)
+        sres = symbolic.solve(problem, engine, timeout_s=budget.remaining(deadline))
         clock.symbolic += time.perf_counter() - t0
+        if sres.status is symbolic.SymbolicStatus.TIMEOUT and deadline is not None:
+            raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({sres.reason})")
         if not sres.solved:
             why = f"symbolic tier ({engine}): {sres.reason}"
             if failures:
@@ -183,13 +205,15 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
         # ---- top tier, step 3 + bottom tier --------------------------------------------
         stream_stats = StreamStats()
         blame: Counter[Transition] = Counter()
-        paths = pose_paths(ctx, planned, domain.info, REGISTRY, rng, stream_stats)
+        paths = pose_paths(ctx, planned, domain.info, REGISTRY, rng, stream_stats, deadline=deadline)
         seen_paths: set[bytes] = set()
         tried = 0
         while tried < options.pose_paths_per_plan:
             ts = time.perf_counter()
-            path = next(paths, None)
-            clock.streams += time.perf_counter() - ts
+            try:
+                path = next(paths, None)
+            finally:  # a timeout's time counts too
+                clock.streams += time.perf_counter() - ts
             if path is None:
                 break
             key = b"".join(seg.primitive.encode() + np.asarray(seg.poses).tobytes() for seg in path.segments)
@@ -198,7 +222,7 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
             seen_paths.add(key)
             tried += 1
             c.pose_paths += 1
-            outcome = _bottom_tier(grasp_planner, path, l_max, c, clock)
+            outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline)
             if outcome.steps is not None:
                 steps = outcome.steps
                 plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, steps,
@@ -257,15 +281,17 @@ class _BottomOutcome:
 
 
 def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters,
-                 clock: _Clock) -> _BottomOutcome:
+                 clock: _Clock, deadline: float | None = None) -> _BottomOutcome:
     """Grasp planning with dichotomy refinement (Algorithm 1's inner loop)."""
     segments = list(path.segments)
     refinements = 0
     last_failing: Segment | None = None
     while True:
         t0 = time.perf_counter()
-        res = planner.plan(PosePath(tuple(segments)))
-        clock.grasp_graph += time.perf_counter() - t0
+        try:
+            res = planner.plan(PosePath(tuple(segments)), deadline=deadline)
+        finally:  # a timeout's time counts too
+            clock.grasp_graph += time.perf_counter() - t0
         c.feasibility_checks += res.feasibility_checks
         c.grasp_graph_nodes = res.nodes
         c.grasp_graph_edges = res.edges

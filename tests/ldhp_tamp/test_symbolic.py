@@ -344,7 +344,7 @@ def test_available_engines_is_quiet_and_has_pyperplan(capsys):
 
 def test_unknown_engine_lists_the_installed_ones(ldhp):
     problem = build_problem(ldhp, lifting_graph())
-    with pytest.raises(EngineError, match="unknown planning engine 'nope'; installed: .*pyperplan"):
+    with pytest.raises(EngineError, match="unknown planning engine 'nope' for domain .*ldhp.pddl; installed: .*pyperplan"):
         solve(problem, engine="nope")
 
 
