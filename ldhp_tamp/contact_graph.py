@@ -77,7 +77,9 @@ class PlanningContext:
 
     ``transition_witnesses`` caps how many witness poses per state are swept to find the
     admissible transitions; ``stream_samples`` is the number of parameter samples a stream
-    yields per transition (paper: limited and ranked by a light heuristic).
+    yields per transition (paper: limited and ranked by a light heuristic). ``deadline``
+    (a :func:`time.perf_counter` value, or ``None``) is the solve's time budget, which the
+    loops over states check (:func:`ldhp_tamp.budget.check`).
     """
 
     world: World
@@ -89,6 +91,7 @@ class PlanningContext:
     workspace: Workspace
     transition_witnesses: int = 1
     stream_samples: int = 3
+    deadline: float | None = None
 
     @property
     def start_free(self) -> bool:
@@ -170,7 +173,7 @@ def proper_states(world: World, witnesses: tuple[StateWitness, ...]) -> tuple[St
 
 
 def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses: int = 1,
-                  stream_samples: int = 3) -> PlanningContext:
+                  stream_samples: int = 3, deadline: float | None = None) -> PlanningContext:
     """Steps 1-2 inputs: the workspace, contact poses T'_0 and T'_g, the enumerated states
     (without degenerate vertex-on-vertex states, see :func:`proper_states`).
 
@@ -181,14 +184,19 @@ def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses
     """
     workspace = workspace_for_task(world, start, goal)
     reach = float(math.hypot(workspace.xmax - workspace.xmin, workspace.ymax - workspace.ymin))
-    start_c = contact_pose(world, start, reach)
-    goal_c = contact_pose(world, goal, reach)
+    found: dict[str, ContactPose] = {}
+    for end, pose in (("start", start), ("goal", goal)):
+        try:
+            found[end] = contact_pose(world, pose, reach)
+        except ContactPoseError as exc:
+            raise ContactPoseError(f"no contact pose for the {end}: {exc}") from None
+    start_c, goal_c = found["start"], found["goal"]
     enumerated = enumerate_contact_states(world, workspace)
     witnesses = proper_states(world, enumerated)
     log.info("contact states: %d enumerated, %d kept; T'_0 in %s, T'_g in %s", len(enumerated),
              len(witnesses), start_c.state.name, goal_c.state.name)
     return PlanningContext(world, start, goal, start_c, goal_c, witnesses, workspace,
-                           transition_witnesses, stream_samples)
+                           transition_witnesses, stream_samples, deadline)
 
 
 def admissible_transitions(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry,

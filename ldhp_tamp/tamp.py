@@ -134,6 +134,8 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     try:
         return _solve(scenario, options, progress, c, clock, Budget(options.timeout, clock.start).deadline)
     except TimeBudgetExceeded as exc:
+        if c.top_iterations == 0:
+            clock.setup = time.perf_counter() - clock.start
         return _failed(scenario, options.engine or scenario.settings.engine,
                        f"timeout: the {options.timeout:g} s budget ran out in {exc.where}; "
                        f"{c.top_iterations} top-tier iteration(s), {c.pose_paths} pose path(s) tried", c, clock)
@@ -159,10 +161,12 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     world = scenario.world
 
     try:
-        ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples)
+        ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples,
+                            deadline=deadline)
     except ContactPoseError as exc:
         return _failed(scenario, engine, f"top tier, step 1: {exc}", c, clock)
     c.contact_state_nodes = len(ctx.states)
+    budget.check(deadline, "the setup (contact states)")
     transitions = admissible_transitions(ctx, domain.info, REGISTRY)
     grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples))
     adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
@@ -196,11 +200,17 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
             raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({sres.reason})")
         if not sres.solved:
             why = f"symbolic tier ({engine}): {sres.reason}"
-            if failures:
-                why += "; after geometric failures: " + "; ".join(failures[-5:])
+            if sres.status is symbolic.SymbolicStatus.UNSOLVABLE and not any(
+                    b == ctx.goal_state for pairs in allowed.values() for _, b in pairs):
+                why += (f"; no admissible{' and unforbidden' if forbidden else ''} transition of a declared "
+                        f"MoveObject primitive enters {ctx.goal_state.name}")
+            if failures:  # the cause is what failed geometrically; the symbolic tier ran out of plans
+                names = sorted(f"{t.action} {t.from_state.name}->{t.to_state.name}" for t in forbidden)
+                shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+                why = "; ".join(failures[-5:]) + f"; after forbidding {shown}, the {why}"
             return _failed(scenario, engine, why, c, clock)
         planned = [a.transition for a in sres.actions if a.transition is not None]
-        say(f"iteration {iteration}: " + " -> ".join(str(a) for a in sres.actions))
+        say(f"iteration {iteration}: " + (" -> ".join(str(a) for a in sres.actions) or "(the empty plan)"))
 
         # ---- top tier, step 3 + bottom tier --------------------------------------------
         stream_stats = StreamStats()
@@ -244,6 +254,12 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
         culprits = list(blame) or list(stream_stats.dead_ends)
         if not culprits and tried == 0 and planned:
             culprits = [planned[0]]
+        if not culprits and tried == 0:
+            within = ", ".join(sorted(s.name for s in stream_stats.alignment_failures)) or ctx.goal_state.name
+            return _failed(scenario, engine, "top tier, step 3: the contact-state plan needs no change of "
+                           f"contact state (start and goal are both in {ctx.goal_state.name}), but no in-state "
+                           "motion (a push, a tip then a push, or a biplanar slide) takes the object from the "
+                           f"start pose to the goal pose without leaving {within}", c, clock)
         if not culprits:
             return _failed(scenario, engine, "top tier: the contact-state plan needs no object motion "
                            "but the bottom tier found no grasp sequence: " + "; ".join(failures[-3:]), c, clock)

@@ -29,6 +29,7 @@ from geometry.features import FREE, Contact, ContactKind, ContactState
 from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, kept_contact_holds, rotate_about, sweep, translate, two_contact
 from geometry.poses import Pose, wrap_angle
 from geometry.world import World
+from ldhp_tamp import budget
 from ldhp_tamp.path import Segment
 from ldhp_tamp.primitives.registry import REGISTRY, Family
 
@@ -81,6 +82,7 @@ class _Swept:
     def transitions(self, ctx: PlanningContext) -> set[tuple[ContactState, ContactState]]:
         pairs: set[tuple[ContactState, ContactState]] = set()
         for state in ctx.states:
+            budget.check(ctx.deadline, f"the setup ({self.name} transitions)")
             if state.is_free:
                 continue
             for pose in ctx.witness_poses(state):

@@ -37,6 +37,7 @@ from ldhp_tamp.tamp import SolveOptions, SolveStatus, solve
 
 PICK = scenarios_dir() / "example_pick.toml"
 TASK1 = scenarios_dir() / "task1_zero_mobility_lift.toml"
+UNSOLVABLE = Path(__file__).resolve().parents[1] / "data" / "scenarios" / "unsolvable"
 #: How far past its budget a solve may run: one deadline check's worth of work (a G_m
 #: chunk, a search round, a stream sample) plus process and clock noise.
 SLACK_S = 0.75
@@ -223,6 +224,17 @@ def test_a_budget_shorter_than_the_setup_fails_after_it() -> None:
     assert result.reason.startswith("timeout: the 0.001 s budget ran out in the setup")
     assert result.plan.stats.contact_state_nodes > 0  # what was gathered so far
     assert elapsed < 1.0 + SLACK_S
+
+
+def test_the_admissible_transitions_stop_at_the_deadline() -> None:
+    # 78 contact states: sweeping them all for the transitions takes ~1 s
+    sc = load_scenario(UNSOLVABLE / "goal_in_closed_box.toml")
+    t0 = time.perf_counter()
+    result = solve(sc, SolveOptions(timeout=0.8))
+    elapsed = time.perf_counter() - t0
+    _assert_timed_out(result, 0.8, elapsed)
+    assert "ran out in the setup (" in result.reason and result.plan.stats.top_iterations == 0
+    assert result.plan.stats.time_s["setup"] >= 0.8
 
 
 def test_a_hanging_engine_is_a_timeout_of_the_symbolic_tier(hanging_engine) -> None:
