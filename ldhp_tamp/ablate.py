@@ -641,7 +641,10 @@ def format_table(table: AblationTable) -> str:
     if notes:
         lines += ["", "Not a plain failure to find a plan:"]
         for c in notes:
-            lines.append(f"- without {c.removed}, {c.scenario}: {c.status}: {' '.join(c.reason.split())}")
+            label = "baseline" if c.removed == BASELINE else f"without {c.removed}"
+            reason = " ".join(c.reason.split())
+            what = reason if reason.startswith(c.status) else f"{c.status}: {reason}"
+            lines.append(f"- {label}, {c.scenario}: {what}")
     total = sum(c.time_s for row in table.rows for c in row.cells)
     lines += ["", f"{sum(len(r.cells) for r in table.rows)} solves, {total:.1f} s of solving in all."]
     return "\n".join(lines) + "\n"

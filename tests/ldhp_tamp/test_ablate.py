@@ -213,3 +213,12 @@ def test_timeout_without_planner_support_warns(caplog: pytest.LogCaptureFixture)
         ablate([PICK], AblationOptions(timeout_s=5.0, remove=("lift",)))
     warned = any("--timeout is ignored" in r.getMessage() for r in caplog.records)
     assert warned == (not solver_has_timeout())
+
+
+def test_a_solve_out_of_time_is_a_timeout_cell() -> None:
+    table = ablate([PICK], AblationOptions(remove=("tip",), timeout_s=0.01))
+    cells = [c for row in table.rows for c in row.cells]
+    assert [(c.removed, c.feasible, c.status) for c in cells] == [(BASELINE, False, "timeout"),
+                                                                  ("tip", False, "timeout")]
+    text = format_table(table)
+    assert "| none (baseline) | N |" in text and "- baseline, example-pick: timeout: " in text
