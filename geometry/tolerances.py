@@ -22,6 +22,12 @@ PENETRATION_TOL: float = 0.1
 #: thin sliver at a vertex sink about twice its tolerance.
 SWEEP_TOL: float = 1e-4
 
+#: A Step-1 contact pose stops this far (mm) short of where the sweep is blocked: a sweep
+#: ends where the overlap test starts to fail, i.e. already sunk into the solid by up to a
+#: few SWEEP_TOL at a vertex, and a rotation about that vertex could then start inside
+#: the solid and be blocked at once. Far below CONTACT_TOL: the pose still touches.
+CONTACT_BACKOFF: float = 1e-3
+
 #: Overlap tolerance (mm) between a candidate grasp's fingers (and palm) and the object
 #: in the object frame: fingers that touch the object sit exactly on its boundary.
 GRASP_OBJECT_TOL: float = 1e-3

@@ -22,7 +22,7 @@ from geometry.contacts import StateWitness, Workspace, contact_state, enumerate_
 from geometry.features import FREE, ContactState
 from geometry.kinematics import SweepEnd, sweep, translate
 from geometry.poses import Pose
-from geometry.tolerances import CONTACT_TOL
+from geometry.tolerances import CONTACT_BACKOFF, CONTACT_TOL
 from geometry.world import World
 from ldhp_tamp.primitives.registry import DomainInfo, PrimitiveRegistry
 
@@ -63,7 +63,12 @@ def contact_pose(world: World, pose: Pose, reach: float) -> ContactPose:
         if sw.end is not SweepEnd.BLOCKED or sw.states[-1].is_free:
             continue
         if best is None or sw.s_end < best.travel - 1e-9:
-            best = ContactPose(sw.motion.pose(sw.s_end), sw.states[-1], sw.s_end, d)
+            travel = max(0.0, sw.s_end - CONTACT_BACKOFF)
+            pose_c = sw.motion.pose(travel)
+            state_c = contact_state(world, pose_c)
+            if state_c != sw.states[-1]:  # the back-off must not lose the contact made
+                pose_c, state_c, travel = sw.motion.pose(sw.s_end), sw.states[-1], sw.s_end
+            best = ContactPose(pose_c, state_c, travel, d)
     if best is None:
         raise ContactPoseError(
             f"the object at {pose.to_degrees()} touches nothing when moved up to {reach:.0f} mm "
