@@ -682,9 +682,35 @@ class _Answer:
     warnings: tuple[str, ...] = ()
 
 
+def _deterministic_pyperplan() -> None:
+    """Make pyperplan's plans independent of ``PYTHONHASHSEED``.
+
+    pyperplan grounds each action's operators from a *set* of object names, so the order
+    of ``task.operators`` -- hence of successors, of the search's tie-breaking, and of the
+    plan among equally good ones -- changes from one process to the next. Sorting the
+    operators by name after grounding (``up_pyperplan.engine`` calls ``_ground`` by that
+    name) fixes it; installed once, before the first pyperplan call.
+    """
+    import up_pyperplan.engine as engine  # the engine is installed: the factory made it
+
+    ground = engine._ground
+    if getattr(ground, "sorted_operators", False):
+        return
+
+    def sorted_ground(*args: object, **kwargs: object) -> object:
+        task = ground(*args, **kwargs)
+        task.operators.sort(key=lambda op: op.name)
+        return task
+
+    sorted_ground.sorted_operators = True  # type: ignore[attr-defined]
+    engine._ground = sorted_ground
+
+
 def _run_engine(problem: SymbolicProblem, engine: str, timeout_s: float | None) -> _Answer:
     """Call the engine in this process (the caller holds the lock and the directory)."""
     factory = _environment().factory
+    if engine in _EXHAUSTIVE_ENGINES:  # the pyperplan engines
+        _deterministic_pyperplan()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         with factory.OneshotPlanner(name=engine) as planner:
