@@ -5,7 +5,10 @@ loop (the top-tier iterations, the streams, the grasp-graph search) call :func:`
 which raises :class:`~ldhp_tamp.errors.TimeBudgetExceeded` once it has passed; the TAMP
 loop turns that into a failed result (reason ``timeout: ...``). The symbolic engine call
 cannot be interrupted that way (pyperplan ignores unified-planning's timeout), so
-:mod:`ldhp_tamp.symbolic` runs it in a child process and kills it at the deadline.
+:mod:`ldhp_tamp.symbolic` runs it in a child process and kills it at the deadline. The
+vectorised geometry (contact-state enumeration, grasp enumeration) has no checks of its
+own: :func:`alarm` is the backstop, a timer signal that raises the same exception from
+whatever Python code runs :data:`ALARM_GRACE_S` after the deadline.
 
 >>> b = Budget.of(None)
 >>> b.deadline is None and not b.expired() and b.remaining() is None
@@ -16,12 +19,21 @@ True
 
 from __future__ import annotations
 
+import contextlib
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
+from types import FrameType
+from typing import Iterator
 
 from ldhp_tamp.errors import TimeBudgetExceeded
 
-__all__ = ["Budget", "check", "expired", "remaining"]
+__all__ = ["ALARM_GRACE_S", "Budget", "alarm", "check", "expired", "remaining"]
+
+#: How long after the deadline :func:`alarm` interrupts: the cooperative checks, which
+#: name their stage precisely, normally come first.
+ALARM_GRACE_S = 0.25
 
 
 def expired(deadline: float | None) -> bool:
@@ -82,3 +94,42 @@ class Budget:
 
     def check(self, where: str) -> None:
         check(self.deadline, where)
+
+
+@contextlib.contextmanager
+def alarm(deadline: float | None, grace: float = ALARM_GRACE_S) -> Iterator[None]:
+    """Raise :class:`TimeBudgetExceeded` in the body at ``deadline + grace``, wherever it is.
+
+    A backstop for stages without :func:`check` calls. It uses ``SIGALRM`` and a real-time
+    interval timer, so it is active only in the main thread, where the platform has them
+    and when no other ``SIGALRM`` handler is installed; otherwise the body runs without it.
+    The previous handler is restored and the timer cleared on exit. (A forked child does
+    not inherit the timer.) A long call into compiled code is interrupted when it returns.
+    """
+    usable = (deadline is not None and hasattr(signal, "setitimer")
+              and threading.current_thread() is threading.main_thread()
+              and signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None))
+    if not usable:
+        yield
+        return
+
+    def on_alarm(signum: int, frame: FrameType | None) -> None:
+        raise TimeBudgetExceeded(f"{_innermost(frame)} (interrupted: it has no deadline checks of its own)")
+
+    previous = signal.signal(signal.SIGALRM, on_alarm)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, max(deadline + grace - time.perf_counter(), 1e-3))
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _innermost(frame: FrameType | None) -> str:
+    """The innermost function of the project on the stack, as ``module.function``."""
+    while frame is not None:
+        module = frame.f_globals.get("__name__", "")
+        if module.split(".")[0] in ("geometry", "ldhp_tamp") and module != __name__:
+            return f"{module}.{frame.f_code.co_name}"
+        frame = frame.f_back
+    return "the solve"

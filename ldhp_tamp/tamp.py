@@ -131,8 +131,10 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     """
     clock = _Clock()
     c = _Counters()
+    deadline = Budget(options.timeout, clock.start).deadline
     try:
-        return _solve(scenario, options, progress, c, clock, Budget(options.timeout, clock.start).deadline)
+        with budget.alarm(deadline):
+            return _solve(scenario, options, progress, c, clock, deadline)
     except TimeBudgetExceeded as exc:
         if c.top_iterations == 0:
             clock.setup = time.perf_counter() - clock.start
@@ -300,6 +302,9 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
                  clock: _Clock, deadline: float | None = None) -> _BottomOutcome:
     """Grasp planning with dichotomy refinement (Algorithm 1's inner loop)."""
     segments = list(path.segments)
+    if not segments:  # nothing for a grasp to be carried along
+        return _BottomOutcome(reason="bottom tier: the object need not move (its start pose is the goal "
+                                     "pose), and plans of AdjustGrasp steps alone are not searched")
     refinements = 0
     last_failing: Segment | None = None
     while True:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import statistics
 import subprocess
 import time
@@ -22,7 +23,7 @@ from geometry.features import FREE, ContactState
 from geometry.grasps import GraspOptions, enumerate_grasps
 from geometry.kinematics import translate
 from ldhp_tamp import symbolic
-from ldhp_tamp.budget import Budget, check, expired, remaining
+from ldhp_tamp.budget import Budget, alarm, check, expired, remaining
 from ldhp_tamp.cli import EXIT_BAD_INPUT, EXIT_NO_PLAN, main
 from ldhp_tamp.contact_graph import build_context
 from ldhp_tamp.errors import TimeBudgetExceeded
@@ -180,6 +181,38 @@ def test_the_fork_costs_little_per_engine_call(ldhp) -> None:
         return statistics.median(times)
 
     assert median_s(30.0) - median_s(None) < 0.3
+
+
+def test_the_alarm_interrupts_code_without_deadline_checks() -> None:
+    from geometry import shapes
+
+    def busy() -> None:  # stands for a vectorised stage with no check() calls
+        while True:
+            shapes.segment_distances([[0.0, 0.0]], [[[1.0, 0.0], [2.0, 0.0]]])
+
+    t0 = time.perf_counter()
+    with pytest.raises(TimeBudgetExceeded) as info:
+        with alarm(t0 + 0.2, grace=0.05):
+            busy()
+    assert 0.2 <= time.perf_counter() - t0 < 2.0
+    assert "geometry.shapes.segment_distances" in info.value.where or "the solve" in info.value.where
+    # nothing left behind: the previous handler, no timer
+    assert signal.getsignal(signal.SIGALRM) is signal.SIG_DFL
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+def test_the_alarm_stays_off_without_a_deadline_or_when_sigalrm_is_taken() -> None:
+    with alarm(None):
+        assert signal.getsignal(signal.SIGALRM) is signal.SIG_DFL
+    def mine(signum, frame) -> None:  # noqa: ANN001 - someone else's handler
+        pass
+    previous = signal.signal(signal.SIGALRM, mine)
+    try:
+        with alarm(time.perf_counter() + 0.01, grace=0.0):
+            time.sleep(0.05)  # not interrupted: the handler is not ours to replace
+        assert signal.getsignal(signal.SIGALRM) is mine
+    finally:
+        signal.signal(signal.SIGALRM, previous)
 
 
 # --------------------------------------------------------------------------- the stages
