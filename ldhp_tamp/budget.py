@@ -105,6 +105,9 @@ def alarm(deadline: float | None, grace: float = ALARM_GRACE_S) -> Iterator[None
     and when no other ``SIGALRM`` handler is installed; otherwise the body runs without it.
     The previous handler is restored and the timer cleared on exit. (A forked child does
     not inherit the timer.) A long call into compiled code is interrupted when it returns.
+    The timer fires again every ``grace`` seconds until the body exits: Python swallows an
+    exception raised while a garbage-collector callback or a finaliser runs, and a
+    one-shot alarm landing there would be lost.
     """
     usable = (deadline is not None and hasattr(signal, "setitimer")
               and threading.current_thread() is threading.main_thread()
@@ -118,7 +121,7 @@ def alarm(deadline: float | None, grace: float = ALARM_GRACE_S) -> Iterator[None
 
     previous = signal.signal(signal.SIGALRM, on_alarm)
     try:
-        signal.setitimer(signal.ITIMER_REAL, max(deadline + grace - time.perf_counter(), 1e-3))
+        signal.setitimer(signal.ITIMER_REAL, max(deadline + grace - time.perf_counter(), 1e-3), max(grace, 1e-2))
         yield
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)

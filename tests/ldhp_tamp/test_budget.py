@@ -266,7 +266,10 @@ def test_the_admissible_transitions_stop_at_the_deadline() -> None:
     result = solve(sc, SolveOptions(timeout=0.8))
     elapsed = time.perf_counter() - t0
     _assert_timed_out(result, 0.8, elapsed)
-    assert "ran out in the setup (" in result.reason and result.plan.stats.top_iterations == 0
+    # the sweeps' own checks name the setup; on a slow machine the enumeration before them
+    # may run past the deadline, and the alarm names the function it interrupted
+    assert result.plan.stats.top_iterations == 0
+    assert "ran out in the setup (" in result.reason or "(interrupted: it has no deadline checks" in result.reason
     assert result.plan.stats.time_s["setup"] >= 0.8
 
 
