@@ -3,7 +3,8 @@
 For each planned MoveObject transition s_k -> s_(k+1), the action's registered
 implementation streams a few parameter samples from the current pose T_k, ranked by a
 light heuristic (Sub-step 1); a depth-first search over those samples yields complete
-pose paths T_0..T_n, one after the other. Before an ``air-move`` into free space, and
+pose paths T_0..T_n, one after the other, and after a failure of the bottom tier at step
+j it backjumps to step j (:class:`PathSearch`). Before an ``air-move`` into free space, and
 after the last transition when the goal is a contact pose, a short in-state motion
 aligns the object with T'_g (Sub-step 2): a rotation about a kept contact point and a
 translation along a kept edge, or a biplanar slide, whichever stays in the state and
@@ -33,8 +34,15 @@ log = logging.getLogger(__name__)
 
 #: Poses closer than this (mm, and mm at the object's radius for the angle) coincide.
 ALIGN_TOL_MM = 0.05
-#: Where along an in-state stretch a repositioning motion may end (fractions of it).
-REPOSITION_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
+#: Where along an in-state stretch a repositioning motion may end (fractions of it), in
+#: the order they are tried.
+REPOSITION_FRACTIONS = (0.5, 1.0, 0.25, 0.75)
+#: Most repositioning poses tried for a transition with no sample from the actual pose.
+MAX_REPOSITIONS = 12
+#: The work budget of one contact-state plan's search: samples drawn, and calls of a
+#: primitive's ``sample`` (a sweep per motion family, ~5-30 ms each on the paper's tasks).
+MAX_EXPANSIONS = 200
+MAX_SAMPLE_CALLS = 150
 #: Repositioning motions shorter than this (mm of vertex motion) are not worth a step.
 REPOSITION_MIN_MM = 5.0
 #: Distance (mm of vertex motion) a repositioning motion keeps from the state's boundary.
@@ -61,12 +69,15 @@ class PosePath:
 
 @dataclass
 class StreamStats:
-    """What the streams tried: expansions, and transitions that had no sample."""
+    """What the streams tried: samples drawn, work spent, and where they found none."""
 
-    expansions: int = 0
+    expansions: int = 0  # samples drawn (segments handed to the next level)
+    sample_calls: int = 0  # calls of a primitive's sample(), the unit of the work budget
     dead_ends: Counter = field(default_factory=Counter)  # Transition -> count
+    dead_steps: Counter = field(default_factory=Counter)  # planned step index -> count
     alignment_failures: Counter = field(default_factory=Counter)  # state -> count
     repositions: int = 0  # in-state repositioning motions tried
+    budget_exhausted: bool = False  # the search stopped because max_sample_calls ran out
 
 
 def _close(a: Pose, b: Pose, radius: float) -> bool:
@@ -150,7 +161,7 @@ def reposition(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegi
     Sub-step 2, used here before a transition as well as at the ends: a transition that
     is admissible from one pose of a state may be blocked from another (a block standing
     20 mm from a wall cannot tip towards it, but can once pushed along the floor)."""
-    out: list[Segment] = []
+    stretches: list[tuple[str, Motion, float, float, dict]] = []
     for name in domain.names(Family.MOVE_OBJECT):
         impl = registry.implementation(name)
         families = getattr(impl, "families", None)
@@ -162,96 +173,196 @@ def reposition(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegi
             if not pieces or pieces[0].state != state:
                 continue
             stay = pieces[0].s1
+            speed = motion.vertex_speed(ctx.world)
             if len(pieces) > 1 or sw.end is SweepEnd.BLOCKED:
                 # keep clear of the state's boundary
-                stay -= min(REPOSITION_MARGIN_MM / max(motion.vertex_speed(ctx.world), 1e-9), 0.25 * stay)
-            speed = motion.vertex_speed(ctx.world)
-            for f in fractions:
-                s_end = f * stay
-                if s_end * speed < REPOSITION_MIN_MM:
-                    continue
-                key = "angle" if motion.kind is not MotionKind.TRANSLATE else "travel"
-                val = math.degrees(s_end) if key == "angle" else s_end
-                out.append(_seg(name, state, motion, s_end, ctx, params, **{key: val}))
+                stay -= min(REPOSITION_MARGIN_MM / max(speed, 1e-9), 0.25 * stay)
+            stretches.append((name, motion, stay, speed, params))
+    out: list[Segment] = []
+    for f in fractions:  # every family at the first fraction, then at the next one, ...
+        for name, motion, stay, speed, params in stretches:
+            s_end = f * stay
+            if s_end * speed < REPOSITION_MIN_MM:
+                continue
+            key = "angle" if motion.kind is not MotionKind.TRANSLATE else "travel"
+            val = math.degrees(s_end) if key == "angle" else s_end
+            out.append(_seg(name, state, motion, s_end, ctx, params, **{key: val}))
     return out
 
 
-def _candidates(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry, impl: object,
-                t: Transition, pose: Pose, rng: np.random.Generator, limit: int,
-                stats: StreamStats) -> Iterator[tuple[Segment, ...]]:
-    """A transition's stream: the primitive's own samples from ``pose``; when it has none,
-    samples from poses reached by an in-state motion (:func:`reposition`), ranked by the
-    distance of their end pose to T'_g."""
-    n = 0
-    for seg in impl.sample(ctx, t.from_state, t.to_state, pose, rng, limit):  # type: ignore[attr-defined]
-        n += 1
-        yield (seg,)
-    if n or t.from_state.is_free:
-        return
-    scored: list[tuple[float, int, tuple[Segment, ...]]] = []
-    for pre in reposition(ctx, domain, registry, t.from_state, pose):
-        stats.repositions += 1
-        for seg in impl.sample(ctx, t.from_state, t.to_state, pre.end, rng, limit):  # type: ignore[attr-defined]
-            score = float(ctx.goal_distance(seg.poses[-1:])[0])
-            scored.append((score, len(scored), (pre, seg)))
-    scored.sort(key=lambda x: (x[0], x[1]))
-    for _, _, moves in scored[:limit]:
-        yield moves
+class PathSearch:
+    """Object-pose paths for a contact-state plan, best-ranked samples first: a depth-first
+    search over the stream samples of each transition that *backjumps*.
+
+    Level k draws the samples of transition k from the pose T_k that level k - 1 left
+    (at most ``limit`` per pose, ranked by the heuristic distance to T'_g; when there is
+    none, samples from poses reached by an in-state motion, :func:`reposition`). Each
+    complete path is returned by :meth:`next`; when the bottom tier then fails at planned
+    step j, ``next(j)`` drops every deeper level and continues with the next sample of
+    level j (then j - 1, ...): the steps after j cannot repair a failure at j, so a plain
+    depth-first order, which varies the last step first, would return paths that fail the
+    same way. Iterating the search is ``next()`` without feedback.
+
+    The search is bounded by work, not time (so that a seed gives one result):
+    ``max_sample_calls`` calls of a primitive's ``sample`` (a sweep per motion family;
+    repositioning included) and ``max_expansions`` samples drawn. A level left without a
+    single sample is a dead end, recorded in ``stats`` (by transition and by step), and
+    so is an end pose that no in-state motion aligns with T'_g. Past ``deadline`` (a
+    :func:`time.perf_counter` value) :class:`~ldhp_tamp.errors.TimeBudgetExceeded` is raised.
+    """
+
+    def __init__(self, ctx: PlanningContext, transitions: Sequence[Transition], domain: DomainInfo,
+                 registry: PrimitiveRegistry, rng: np.random.Generator, stats: StreamStats, *,
+                 limit: int | None = None, max_expansions: int = MAX_EXPANSIONS,
+                 max_sample_calls: int = MAX_SAMPLE_CALLS, deadline: float | None = None) -> None:
+        self.ctx = ctx
+        self.transitions = tuple(transitions)
+        self.domain = domain
+        self.registry = registry
+        self.rng = rng
+        self.stats = stats
+        self.limit = ctx.stream_samples if limit is None else limit
+        self.max_expansions = max_expansions
+        self.max_sample_calls = max_sample_calls
+        self.deadline = deadline
+        self._stack: list[_Level] = []
+        self._started = False
+
+    def __iter__(self) -> "PathSearch":
+        return self
+
+    def __next__(self) -> PosePath:
+        path = self.next()
+        if path is None:
+            raise StopIteration
+        return path
+
+    def next(self, failed_step: int | None = None) -> PosePath | None:
+        """The next complete pose path, or ``None`` when the search is exhausted.
+
+        ``failed_step``: the planned step (``Segment.step``) at which the previous path
+        failed; the next path differs from it at that step or an earlier one.
+        """
+        budget.check(self.deadline, "the top tier's streams (object-pose paths)")
+        if not self._started:
+            self._started = True
+            start = self.ctx.start if self.ctx.start_free else self.ctx.start_contact.pose
+            if not self.transitions:  # start and goal in one state: only the alignment
+                return self._finish(start, ())
+            self._stack.append(self._level(0, start, ()))
+        elif failed_step is not None:
+            del self._stack[max(int(failed_step), 0) + 1:]
+        n = len(self.transitions)
+        while self._stack:
+            budget.check(self.deadline, "the top tier's streams (object-pose paths)")
+            level = self._stack[-1]
+            moves = next(level.candidates, None) if self.stats.expansions < self.max_expansions else None
+            if moves is None:
+                self._stack.pop()
+                if not level.found and not self.stats.budget_exhausted and self.stats.expansions < self.max_expansions:
+                    self._dead_end(level.k)
+                continue
+            key = b"".join(m.primitive.encode() + np.round(np.asarray(m.poses), 6).tobytes() for m in moves)
+            if key in level.seen:  # two candidates with one motion (e.g. the goal value is an end)
+                continue
+            level.seen.add(key)
+            self.stats.expansions += 1
+            moves = tuple(replace(m, step=level.k) for m in moves)
+            segments = level.prefix + level.pre + moves
+            if level.k + 1 < n:
+                level.found = True
+                self._stack.append(self._level(level.k + 1, moves[-1].end, segments))
+                continue
+            path = self._finish(moves[-1].end, segments)
+            if path is not None:
+                level.found = True
+                return path
+        return None
+
+    # ---- levels ------------------------------------------------------------------------
+
+    def _level(self, k: int, pose: Pose, prefix: tuple[Segment, ...]) -> "_Level":
+        t = self.transitions[k]
+        pre: tuple[Segment, ...] = ()
+        if t.action == "air-move" and t.to_state.is_free:
+            # Sub-step 2 before Sub-step 3: align with T'_g within the state, then leave it.
+            tail = align(self.ctx, self.domain, self.registry, t.from_state, pose, self.ctx.goal_contact.pose)
+            if tail is None:
+                self.stats.alignment_failures[t.from_state] += 1
+                return _Level(k, pose, prefix, (), iter(()))
+            pre = tuple(replace(a, step=k) for a in tail)
+            if pre:
+                pose = pre[-1].end
+        return _Level(k, pose, prefix, pre, self._candidates(t, pose))
+
+    def _finish(self, pose: Pose, segments: tuple[Segment, ...]) -> PosePath | None:
+        """The complete path: ``segments`` and, when the goal is a contact pose, the
+        in-state alignment from ``pose`` to it (Sub-step 2)."""
+        n = len(self.transitions)
+        if not self.ctx.goal_free:
+            last_state = self.transitions[-1].to_state if n else self.ctx.start_state
+            tail = align(self.ctx, self.domain, self.registry, last_state, pose, self.ctx.goal)
+            if tail is None:
+                self.stats.alignment_failures[last_state] += 1
+                return None
+            segments = segments + tuple(replace(a, step=max(n - 1, 0)) for a in tail)
+        return PosePath(segments)
+
+    def _dead_end(self, k: int) -> None:
+        self.stats.dead_ends[self.transitions[k]] += 1
+        self.stats.dead_steps[k] += 1
+
+    def _sample(self, impl: object, t: Transition, pose: Pose) -> list[Segment] | None:
+        """One stream call within the work budget (``None`` once it is spent)."""
+        if self.stats.sample_calls >= self.max_sample_calls:
+            self.stats.budget_exhausted = True
+            return None
+        self.stats.sample_calls += 1
+        return list(impl.sample(self.ctx, t.from_state, t.to_state, pose,  # type: ignore[attr-defined]
+                                self.rng, self.limit))
+
+    def _candidates(self, t: Transition, pose: Pose) -> Iterator[tuple[Segment, ...]]:
+        """A transition's stream: the primitive's own samples from ``pose``; when it has
+        none, samples from poses reached by an in-state motion (:func:`reposition`, at
+        most ``MAX_REPOSITIONS`` of them), ranked by the distance of their end pose to T'_g."""
+        impl = self.registry.implementation(t.action)
+        own = self._sample(impl, t, pose)
+        if own:
+            yield from ((seg,) for seg in own)
+        if own is None or own or t.from_state.is_free:
+            return
+        scored: list[tuple[float, int, tuple[Segment, ...]]] = []
+        for pre in reposition(self.ctx, self.domain, self.registry, t.from_state, pose)[:MAX_REPOSITIONS]:
+            self.stats.repositions += 1
+            segs = self._sample(impl, t, pre.end)
+            if segs is None:
+                break
+            for seg in segs:
+                scored.append((float(self.ctx.goal_distance(seg.poses[-1:])[0]), len(scored), (pre, seg)))
+        scored.sort(key=lambda x: (x[0], x[1]))
+        for _, _, moves in scored[:self.limit]:
+            yield moves
+
+
+@dataclass(eq=False)
+class _Level:
+    """One level of :class:`PathSearch`: transition ``k`` from ``pose``, after ``prefix``
+    (and the in-state alignment ``pre`` before an air-move into free space)."""
+
+    k: int
+    pose: Pose
+    prefix: tuple[Segment, ...]
+    pre: tuple[Segment, ...]
+    candidates: Iterator[tuple[Segment, ...]]
+    found: bool = False
+    seen: set[bytes] = field(default_factory=set)  # the motions drawn so far
 
 
 def pose_paths(ctx: PlanningContext, transitions: Sequence[Transition], domain: DomainInfo,
                registry: PrimitiveRegistry, rng: np.random.Generator, stats: StreamStats, *,
-               limit: int | None = None, max_expansions: int = 200,
-               deadline: float | None = None) -> Iterator[PosePath]:
-    """Yield complete pose paths for a contact-state plan, best-ranked samples first.
-
-    Depth-first over the stream samples of each transition (at most ``limit`` per
-    transition, default ``ctx.stream_samples``), stopping after ``max_expansions``
-    sampled segments in all. Dead ends are counted in ``stats``. Past ``deadline`` (a
-    :func:`time.perf_counter` value) the next expansion raises
-    :class:`~ldhp_tamp.errors.TimeBudgetExceeded`.
-    """
-    limit = ctx.stream_samples if limit is None else limit
-    n = len(transitions)
-
-    def rec(k: int, pose: Pose, segments: tuple[Segment, ...]) -> Iterator[PosePath]:
-        if stats.expansions >= max_expansions:
-            return
-        budget.check(deadline, "the top tier's streams (object-pose paths)")
-        if k == n:
-            if not ctx.goal_free:
-                last_state = transitions[-1].to_state if n else ctx.start_state
-                tail = align(ctx, domain, registry, last_state, pose, ctx.goal)
-                if tail is None:
-                    stats.alignment_failures[last_state] += 1
-                    if n:
-                        stats.dead_ends[transitions[-1]] += 1
-                    return
-                segments = segments + tuple(replace(a, step=n - 1) for a in tail)
-            yield PosePath(segments)
-            return
-        t = transitions[k]
-        pre: list[Segment] = []
-        if t.action == "air-move" and t.to_state.is_free:
-            tail = align(ctx, domain, registry, t.from_state, pose, ctx.goal_contact.pose)
-            if tail is None:
-                stats.alignment_failures[t.from_state] += 1
-                stats.dead_ends[t] += 1
-                return
-            pre = [replace(a, step=k) for a in tail]
-            if pre:
-                pose = pre[-1].end
-        impl = registry.implementation(t.action)
-        found = False
-        for moves in _candidates(ctx, domain, registry, impl, t, pose, rng, limit, stats):
-            moves = tuple(replace(m, step=k) for m in moves)
-            stats.expansions += 1
-            found = True
-            yield from rec(k + 1, moves[-1].end, segments + tuple(pre) + moves)
-            if stats.expansions >= max_expansions:
-                return
-        if not found:
-            stats.dead_ends[t] += 1
-
-    start = ctx.start if ctx.start_free else ctx.start_contact.pose
-    yield from rec(0, start, ())
+               limit: int | None = None, max_expansions: int = MAX_EXPANSIONS,
+               max_sample_calls: int = MAX_SAMPLE_CALLS, deadline: float | None = None) -> PathSearch:
+    """The pose paths of a contact-state plan: a :class:`PathSearch` (iterate it, or call
+    its ``next(failed_step)`` to backjump after a failure)."""
+    return PathSearch(ctx, transitions, domain, registry, rng, stats, limit=limit,
+                      max_expansions=max_expansions, max_sample_calls=max_sample_calls, deadline=deadline)

@@ -19,7 +19,9 @@ Encoding (see ``domains/ldhp.pddl`` and ``docs/design/symbolic.md``): one object
 ``state`` per contact state (``s-l1-e1``); ``(at s)`` for the start; ``(touching)`` or
 ``(hand-free)``; one static fact ``(can-<a> from to)`` per admissible transition of each
 MoveObject action ``<a>`` that the TAMP loop has not forbidden; the goal ``(at g)`` plus
-``(hand-free)`` with ``goal_release``.
+``(hand-free)`` with ``goal_release``. A :class:`~ldhp_tamp.primitives.registry.Sequel`
+(transition B may not directly follow transition A) adds a copy of the state between them,
+``s-x--after-<A>``, which only A enters and which has every transition of ``s-x`` but B.
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from ldhp_tamp.primitives.registry import (
     ActionInfo,
     DomainInfo,
     Family,
+    Sequel,
     Transition,
     admissibility_predicate,
 )
@@ -423,18 +426,23 @@ class ContactGraph:
 
 @dataclass(frozen=True, eq=False)
 class SymbolicProblem:
-    """One top-tier problem: a contact graph, minus forbidden transitions, as PDDL.
+    """One top-tier problem: a contact graph, minus what the TAMP loop forbade, as PDDL.
 
     Attributes
     ----------
     domain, graph
         What it was built from.
     forbidden
-        The forbidden transitions that the graph did admit (their facts are omitted).
+        The forbidden transitions that the graph did admit (their facts are omitted),
+        including those of sequels that could not be compiled (see :func:`build_problem`).
+    sequels
+        The sequels compiled as state copies.
     admitted
         Number of ``can-*`` facts written.
     up_problem
         The unified-planning problem. Only this module touches it.
+    states_by_name
+        PDDL object name -> contact state (a state's copies map to the state itself).
     """
 
     domain: SymbolicDomain
@@ -443,10 +451,16 @@ class SymbolicProblem:
     admitted: int
     up_problem: up_model.Problem = field(repr=False)
     states_by_name: Mapping[str, ContactState] = field(repr=False)
+    sequels: frozenset[Sequel] = frozenset()
+
+
+def _copy_name(state: ContactState, after: Transition) -> str:
+    """The PDDL object of ``state`` entered by ``after``: ``s-v1-e1--after-tip-s-l1-e1``."""
+    return f"{state.pddl_name}--after-{after.action}-{after.from_state.pddl_name}"
 
 
 def build_problem(domain: SymbolicDomain, graph: ContactGraph,
-                  forbidden: Collection[Transition] = frozenset()) -> SymbolicProblem:
+                  forbidden: Collection[Transition | Sequel] = frozenset()) -> SymbolicProblem:
     """Build the PDDL problem of ``graph`` through the model API, without ``forbidden``.
 
     Only true facts are written (the admissible transitions), so the problem grows with
@@ -459,22 +473,48 @@ def build_problem(domain: SymbolicDomain, graph: ContactGraph,
     graph
         States, admissible transitions, start, goal and the hand at both ends.
     forbidden
-        Transitions the TAMP loop found unrealisable; their ``can-*`` facts are left out,
-        so no engine can use them again (feedback works with every engine).
+        What the TAMP loop found unrealisable. A :class:`Transition` loses its ``can-*``
+        fact, so no engine can use it again. A :class:`Sequel` (``then`` may not directly
+        follow ``after``) is compiled into the problem, so that it too works with every
+        engine and the domain stays as written: the state s between them gets a copy,
+        an object of its own that ``after`` leads to instead of s and that has every
+        transition out of s except ``then``. A sequel through the goal state cannot be
+        compiled (the goal names one object) and forbids ``then`` outright.
     """
     env = _environment()
     em = env.expression_manager
     problem = domain.template.clone()
     problem.name = domain.info.name
     state_type = problem.user_type(STATE_TYPE)
+
+    banned = {t for t in forbidden if isinstance(t, Transition)}
+    sequels: set[Sequel] = set()
+    for q in forbidden:
+        if isinstance(q, Sequel):
+            if q.then.from_state == graph.goal:
+                banned.add(q.then)
+            else:
+                sequels.add(q)
+    # The copies: state -> the transitions entering it that lead to a copy, and what
+    # each copy lacks.
+    lacks: dict[Transition, set[Transition]] = {}
+    for q in sequels:
+        lacks.setdefault(q.after, set()).add(q.then)
+    copies: dict[ContactState, list[Transition]] = {}
+    for after in sorted(lacks, key=str):
+        copies.setdefault(after.to_state, []).append(after)
+
     objects = {s: up_model.Object(s.pddl_name, state_type, env) for s in graph.states}
+    copy_objects = {after: up_model.Object(_copy_name(after.to_state, after), state_type, env)
+                    for entries in copies.values() for after in entries
+                    if after.to_state in objects}
     problem.add_objects(objects.values())
+    problem.add_objects(copy_objects.values())
     at = problem.fluent(AT)
     problem.set_initial_value(em.FluentExp(at, [objects[graph.start]]), True)
     problem.set_initial_value(
         em.FluentExp(problem.fluent(TOUCHING if graph.start_touching else HAND_FREE)), True)
 
-    banned = frozenset(forbidden)
     used: set[Transition] = set()
     admitted = 0
     declared = domain.info.names(Family.MOVE_OBJECT)
@@ -485,21 +525,28 @@ def build_problem(domain: SymbolicDomain, graph: ContactGraph,
         pairs = sorted(graph.transitions.get(name, ()),
                        key=lambda p: (p[0].pddl_name, p[1].pddl_name))
         for a, b in pairs:
-            if Transition(name, a, b) in banned:
-                used.add(Transition(name, a, b))
+            t = Transition(name, a, b)
+            if t in banned:
+                used.add(t)
                 continue
-            problem.set_initial_value(em.FluentExp(predicate, [objects[a], objects[b]]), True)
-            admitted += 1
+            target = copy_objects.get(t, objects[b])
+            sources = [objects[a]] + [copy_objects[after] for after in copies.get(a, ())
+                                      if after in copy_objects and t not in lacks[after]]
+            for source in sources:
+                problem.set_initial_value(em.FluentExp(predicate, [source, target]), True)
+                admitted += 1
 
     problem.add_goal(em.FluentExp(at, [objects[graph.goal]]))
     if graph.goal_release:
         problem.add_goal(em.FluentExp(problem.fluent(HAND_FREE)))
     for t in sorted(banned - used, key=str):
         log.debug("forbidden transition %s is not in the graph", t)
+    by_name = {s.pddl_name: s for s in graph.states}
+    by_name.update({o.name: after.to_state for after, o in copy_objects.items()})
     return SymbolicProblem(
         domain=domain, graph=graph, forbidden=frozenset(used), admitted=admitted,
-        up_problem=problem,
-        states_by_name=types.MappingProxyType({s.pddl_name: s for s in graph.states}),
+        up_problem=problem, states_by_name=types.MappingProxyType(by_name),
+        sequels=frozenset(q for q in sequels if q.after in copy_objects),
     )
 
 
@@ -829,7 +876,8 @@ def _no_path(problem: SymbolicProblem) -> str:
     text = (f"no contact-state path from {graph.start.pddl_name} to {graph.goal.pddl_name}"
             f"{' ending with the hand free' if graph.goal_release else ''}"
             f" with the declared primitives (MoveObject: {moves}; {problem.admitted} "
-            f"admissible transition(s), {len(problem.forbidden)} forbidden)")
+            f"admissible transition(s), {len(problem.forbidden)} forbidden"
+            + (f", {len(problem.sequels)} forbidden after another" if problem.sequels else "") + ")")
     if not graph.start_touching and not domain.grasp_makers:
         text += f"; the hand starts free and no action makes ({TOUCHING}) true"
     if graph.goal_release and not domain.releasers:
@@ -879,6 +927,11 @@ def emit_pddl(directory: str | Path, problem: SymbolicProblem, iteration: int) -
               f"; {problem.admitted} admissible transition(s); "
               f"forbidden after failed refinements: {len(problem.forbidden)}"]
     header += [f";   forbidden: ({t})" for t in sorted(problem.forbidden, key=str)]
+    if problem.sequels:
+        header.append(f"; forbidden right after another transition: {len(problem.sequels)} (the state between "
+                      "them has a copy 's-x--after-<action>-<from>' that only the first enters and that lacks "
+                      "the second)")
+        header += [f";   forbidden: ({q.then}) after ({q.after})" for q in sorted(problem.sequels, key=str)]
     path = out / f"problem-{iteration:02d}.pddl"
     path.write_text("\n".join(header) + "\n" + writer.get_problem(), encoding="utf-8")
     log.info("wrote %s", path)

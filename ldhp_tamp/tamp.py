@@ -35,9 +35,9 @@ from ldhp_tamp.grasp_graph import GraspPlanner, GraspPlanStatus
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family, check_against_domain
-from ldhp_tamp.primitives.registry import Transition
+from ldhp_tamp.primitives.registry import Sequel, Transition
 from ldhp_tamp.scenario import Scenario
-from ldhp_tamp.streams import PosePath, StreamStats, pose_paths
+from ldhp_tamp.streams import PathSearch, PosePath, StreamStats
 from ldhp_tamp.validate import validate_plan
 
 log = logging.getLogger(__name__)
@@ -178,7 +178,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
         f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 
-    forbidden: set[Transition] = set()
+    forbidden: set[Transition | Sequel] = set()
     failures: list[str] = []
     for iteration in range(1, h_max + 1):
         c.top_iterations = iteration
@@ -207,7 +207,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                 why += (f"; no admissible{' and unforbidden' if forbidden else ''} transition of a declared "
                         f"MoveObject primitive enters {ctx.goal_state.name}")
             if failures:  # the cause is what failed geometrically; the symbolic tier ran out of plans
-                names = sorted(f"{t.action} {t.from_state.name}->{t.to_state.name}" for t in forbidden)
+                names = sorted(f.label for f in forbidden)
                 shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
                 why = "; ".join(failures[-5:]) + f"; after forbidding {shown}, the {why}"
             return _failed(scenario, engine, why, c, clock)
@@ -216,20 +216,22 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
 
         # ---- top tier, step 3 + bottom tier --------------------------------------------
         stream_stats = StreamStats()
-        blame: Counter[Transition] = Counter()
-        paths = pose_paths(ctx, planned, domain.info, REGISTRY, rng, stream_stats, deadline=deadline)
+        search = PathSearch(ctx, planned, domain.info, REGISTRY, rng, stream_stats, deadline=deadline)
         seen_paths: set[bytes] = set()
+        failed_steps: list[int] = []  # the planned step at which each pose path failed
+        failed_step: int | None = None
         tried = 0
         while tried < options.pose_paths_per_plan:
             ts = time.perf_counter()
             try:
-                path = next(paths, None)
+                path = search.next(failed_step)
             finally:  # a timeout's time counts too
                 clock.streams += time.perf_counter() - ts
             if path is None:
                 break
             key = b"".join(seg.primitive.encode() + np.asarray(seg.poses).tobytes() for seg in path.segments)
             if key in seen_paths:
+                failed_step = None
                 continue  # the streams can reach the same path twice (e.g. via an in-state alignment)
             seen_paths.add(key)
             tried += 1
@@ -247,32 +249,73 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                 log.warning("the bottom tier's plan does not validate (%d violations: %s); "
                             "treating it as a failure", len(report.violations), msg)
                 failures.append(f"plan failed validation ({msg})")
+                failed_step = None
                 continue
             failures.append(outcome.reason)
             seg = outcome.segment
-            if seg is not None and 0 <= seg.step < len(planned):
-                blame[planned[seg.step]] += 1
+            failed_step = seg.step if seg is not None and 0 <= seg.step < len(planned) else None
+            log.info("iteration %d, pose path %d (%s) failed at step %s: %s", iteration, tried,
+                     " ".join(f"{s.primitive}@{s.step}" for s in path.segments), failed_step, outcome.reason)
+            if failed_step is not None:
+                failed_steps.append(failed_step)
+        log.info("iteration %d: %d pose path(s) tried; streams: %d samples drawn, %d sample calls%s, "
+                 "dead ends at steps %s, %d alignment failure(s)", iteration, tried, stream_stats.expansions,
+                 stream_stats.sample_calls, " (work budget spent)" if stream_stats.budget_exhausted else "",
+                 dict(stream_stats.dead_steps), sum(stream_stats.alignment_failures.values()))
         # ---- feedback: forbid what failed, re-plan ------------------------------------
-        culprits = list(blame) or list(stream_stats.dead_ends)
-        if not culprits and tried == 0 and planned:
-            culprits = [planned[0]]
-        if not culprits and tried == 0:
+        if stream_stats.dead_ends:
+            failures.append("no stream sample for " + ", ".join(t.label for t in stream_stats.dead_ends))
+        # The deepest step the bottom tier failed at (the paths that failed earlier were
+        # varied there and got past it); when no path reached it, the deepest dead end of
+        # the streams. Dead ends found after a bottom-tier failure, while the search tried
+        # the failed step's other samples, only say those samples were no better.
+        deepest = max(failed_steps or list(stream_stats.dead_steps), default=None)
+        if deepest is None and planned and tried == 0:
+            deepest = 0  # the streams ran out of work before any dead end: blame the first step
+        if deepest is None and tried == 0:
             within = ", ".join(sorted(s.name for s in stream_stats.alignment_failures)) or ctx.goal_state.name
             return _failed(scenario, engine, "top tier, step 3: the contact-state plan needs no change of "
                            f"contact state (start and goal are both in {ctx.goal_state.name}), but no in-state "
                            "motion (a push, a tip then a push, or a biplanar slide) takes the object from the "
                            f"start pose to the goal pose without leaving {within}", c, clock)
-        if not culprits:
+        if deepest is None:
             return _failed(scenario, engine, "top tier: the contact-state plan needs no object motion "
                            "but the bottom tier found no grasp sequence: " + "; ".join(failures[-3:]), c, clock)
+        culprits = _culprits(planned, deepest, forbidden)
         forbidden.update(culprits)
-        if stream_stats.dead_ends:
-            failures.append("no stream sample for " + ", ".join(
-                f"{t.action} {t.from_state.name}->{t.to_state.name}" for t in stream_stats.dead_ends))
-        say(f"iteration {iteration} failed; forbidding " + ", ".join(
-            f"{t.action} {t.from_state.name}->{t.to_state.name}" for t in culprits))
+        say(f"iteration {iteration} failed; forbidding " + ", ".join(q.label for q in culprits))
     return _failed(scenario, engine, f"no feasible plan after {h_max} top-tier iterations (H_max): "
                    + "; ".join(failures[-5:]), c, clock)
+
+
+#: A transition after which this many different transitions have failed is itself
+#: condemned (in its own context): the pose it leaves the object in is the likelier cause.
+ESCALATE_AFTER = 2
+
+
+def _culprits(planned: list[Transition], step: int, forbidden: set[Transition | Sequel]
+              ) -> list[Transition | Sequel]:
+    """What a failure at planned step ``step`` condemns, given what is forbidden already.
+
+    The first step starts from a fixed pose (T_0 or T'_0): the transition itself. A later
+    one starts from wherever its predecessor left the object, which depends on how the
+    state was entered: the pair (this step right after that one), so that other ways
+    into the state stay open. When ``ESCALATE_AFTER`` different transitions have now
+    failed right after the same predecessor, the predecessor is condemned too, in its
+    own context (the pose it produces is the common cause), and so on up the plan.
+    """
+    out: list[Transition | Sequel] = []
+    known = set(forbidden)
+    while True:
+        if step == 0:
+            out.append(planned[0])
+            return out
+        after = planned[step - 1]
+        out.append(Sequel(after, planned[step]))
+        known.add(out[-1])
+        if sum(1 for q in known if isinstance(q, Sequel) and q.after == after) < ESCALATE_AFTER:
+            return out
+        step -= 1
 
 
 def _refinement_target(segments: list[Segment], k: int | None) -> int | None:

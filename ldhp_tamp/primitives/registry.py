@@ -76,6 +76,35 @@ class Transition:
     def __str__(self) -> str:
         return f"{self.action} {self.from_state.pddl_name} {self.to_state.pddl_name}"
 
+    @property
+    def label(self) -> str:
+        """``tip l1-e1->v2-e1``: how reasons and progress messages name it."""
+        return f"{self.action} {self.from_state.name}->{self.to_state.name}"
+
+
+@dataclass(frozen=True)
+class Sequel:
+    """A transition that could not be realised right after another one: ``then`` may not
+    directly follow ``after`` (so ``after.to_state == then.from_state``).
+
+    The TAMP loop's feedback when a step fails geometrically from the pose its
+    predecessor left the object in: the pose inside a contact state depends on how the
+    state was entered, so the failure condemns the pair, not ``then`` everywhere. The
+    symbolic tier compiles it into the problem (``symbolic.build_problem``) by giving
+    the middle state a copy that only ``after`` enters and that lacks ``then``.
+    """
+
+    after: Transition
+    then: Transition
+
+    def __post_init__(self) -> None:
+        if self.after.to_state != self.then.from_state:
+            raise ValueError(f"{self.then.label} cannot follow {self.after.label}")
+
+    @property
+    def label(self) -> str:
+        return f"{self.then.label} after {self.after.label}"
+
 
 # --------------------------------------------------------------------------- protocols
 

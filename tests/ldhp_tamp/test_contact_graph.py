@@ -215,3 +215,55 @@ def test_task1_pddl_problem_has_the_eight_state_graph(task1, domain) -> None:
     assert result.solved
     assert [str(a.transition) for a in result.actions if a.transition] == [
         "tip s-l1-e1 s-v2-e1", "air-move s-v2-e1 s-free"]
+
+
+def _first_difference(a, b) -> int | None:
+    """The first planned step at which two pose paths differ (None if they are equal)."""
+    steps = sorted({s.step for s in a.segments} | {s.step for s in b.segments})
+    for k in steps:
+        sa = [s.poses for s in a.segments if s.step == k]
+        sb = [s.poses for s in b.segments if s.step == k]
+        if len(sa) != len(sb) or any(x.shape != y.shape or not np.allclose(x, y) for x, y in zip(sa, sb)):
+            return k
+    return None
+
+
+def test_the_search_backjumps_to_the_failed_step(task2, domain) -> None:
+    """After a failure at step j the next path differs at step j or before it, never only
+    after it; without feedback the search is a plain depth-first one."""
+    _, ctx = task2
+    plan = [Transition("air-move", FREE, S("l1-e1")), Transition("tip", S("l1-e1"), S("v1-e1")),
+            Transition("tip", S("v1-e1"), S("l4-e1"))]
+    plain = pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats())
+    first, second = plain.next(), plain.next()
+    assert _first_difference(first, second) == 2  # the last step varies first
+    search = pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats())
+    previous = search.next()
+    assert _first_difference(previous, first) is None
+    for _ in range(3):
+        path = search.next(failed_step=1)
+        if path is None:
+            break
+        assert _first_difference(previous, path) <= 1
+        check_joined(path.segments)
+        previous = path
+
+
+def test_the_search_stops_when_its_work_budget_is_spent(task2, domain) -> None:
+    _, ctx = task2
+    plan = [Transition("air-move", FREE, S("l1-e1")), Transition("tip", S("l1-e1"), S("v1-e1")),
+            Transition("tip", S("v1-e1"), S("l4-e1"))]
+    stats = StreamStats()
+    # the second tip needs repositioning samples: far more than three sample calls
+    assert list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), stats,
+                           max_sample_calls=3)) == []
+    assert stats.budget_exhausted and stats.sample_calls == 3
+    assert not stats.dead_ends  # running out of work is not evidence against a transition
+
+
+def test_dead_ends_are_recorded_by_step(task2, domain) -> None:
+    _, ctx = task2
+    plan = [Transition("air-move", FREE, S("l1-e1")), Transition("tip", S("l1-e1"), S("l3-e1"))]
+    stats = StreamStats()
+    assert list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), stats)) == []
+    assert set(stats.dead_steps) == {1} and not stats.budget_exhausted

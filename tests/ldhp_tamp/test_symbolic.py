@@ -11,7 +11,7 @@ import pytest
 
 from geometry.features import FREE, ContactState
 from ldhp_tamp.errors import DomainError, EngineError, InputError
-from ldhp_tamp.primitives import Family, PrimitiveRegistry, check_against_domain
+from ldhp_tamp.primitives import Family, PrimitiveRegistry, Sequel, check_against_domain
 from ldhp_tamp.resources import domains_dir
 from ldhp_tamp.symbolic import (
     ContactGraph,
@@ -309,6 +309,47 @@ def test_feedback_loop_terminates_in_unsolvable(ldhp):
     assert f"{len(forbidden)} forbidden" in result.reason
 
 
+def _line_graph() -> ContactGraph:
+    """a -> b -> d, a -> c -> b: the state b entered two ways, and b -> d the only way out."""
+    a, b, c, d = (S(f"l{i}-e1") for i in range(1, 5))
+    return ContactGraph(states=(a, b, c, d),
+                        transitions={"tip": frozenset({(a, b), (b, d), (a, c)}), "push": frozenset({(c, b)})},
+                        start=a, goal=d, start_touching=True)
+
+
+def test_a_sequel_forbids_a_step_only_right_after_its_predecessor(ldhp):
+    graph = _line_graph()
+    a, b, c, d = graph.states
+    direct = solve(build_problem(ldhp, graph))
+    assert [t.label for t in direct.transitions()] == ["tip l1-e1->l2-e1", "tip l2-e1->l4-e1"]
+    after_tip = Sequel(Transition("tip", a, b), Transition("tip", b, d))
+    problem = build_problem(ldhp, graph, {after_tip})
+    assert problem.sequels == {after_tip} and not problem.forbidden
+    detour = solve(problem)
+    # b is now entered the other way; the plan maps the copy back to b itself
+    assert [t.label for t in detour.transitions()] == ["tip l1-e1->l3-e1", "push l3-e1->l2-e1", "tip l2-e1->l4-e1"]
+    assert "sequel" not in detour.reason and all(t.to_state in graph.states for t in detour.transitions())
+    # forbidding the detour's last step after the push too leaves no plan
+    after_push = Sequel(Transition("push", c, b), Transition("tip", b, d))
+    none = solve(build_problem(ldhp, graph, {after_tip, after_push}))
+    assert none.status is SymbolicStatus.UNSOLVABLE and "2 forbidden after another" in none.reason
+
+
+def test_a_sequel_through_the_goal_state_forbids_its_step_outright(ldhp):
+    graph = _line_graph()
+    a, b, c, d = graph.states
+    graph = ContactGraph(graph.states, graph.transitions, start=a, goal=b, start_touching=True)
+    q = Sequel(Transition("tip", a, b), Transition("tip", b, d))
+    problem = build_problem(ldhp, graph, {q})
+    assert problem.forbidden == {q.then} and not problem.sequels
+
+
+def test_a_sequel_needs_joined_transitions():
+    a, b, c, d = _line_graph().states
+    with pytest.raises(ValueError, match="cannot follow"):
+        Sequel(Transition("tip", a, b), Transition("push", c, b))
+
+
 # --------------------------------------------------------------------------- --emit-pddl
 
 
@@ -321,6 +362,12 @@ def test_emitted_pddl_reparses_and_shows_the_constraints(ldhp, tmp_path):
     second = emit_pddl(tmp_path, build_problem(ldhp, graph, {failed}), 2)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["domain.pddl", "problem-01.pddl",
                                                          "problem-02.pddl"]
+    into_v1 = Transition("tip", L[0], V[0])
+    third = emit_pddl(tmp_path, build_problem(ldhp, graph, {Sequel(into_v1, Transition("tip", V[0], L[3]))}), 3)
+    assert ";   forbidden: (tip s-v1-e1 s-l4-e1) after (tip s-l1-e1 s-v1-e1)" in third.read_text()
+    assert "(can-tip s-l1-e1 s-v1-e1--after-tip-s-l1-e1)" in third.read_text()
+    PDDLReader().parse_problem(str(tmp_path / "domain.pddl"), str(third))
+    third.unlink()
     text = second.read_text()
     assert "; top-tier iteration 2" in text
     assert ";   forbidden: (tip s-l1-e1 s-v2-e1)" in text

@@ -98,3 +98,25 @@ def test_cli_solve_bad_input_exits_2(tmp_path: Path, capsys) -> None:
     assert "bad.toml" in err and "Traceback" not in err
     assert not (tmp_path / "p.json").exists()
     assert main(["solve", str(PICK), "--engine", "no-such-engine", "--out", str(tmp_path / "q.json")]) == 2
+
+
+# --------------------------------------------------------------------------- feedback policy
+
+
+def test_a_failure_condemns_the_step_after_its_predecessor_and_escalates() -> None:
+    from geometry.features import FREE, ContactState
+    from ldhp_tamp.primitives import Sequel, Transition
+    from ldhp_tamp.tamp import ESCALATE_AFTER, _culprits
+
+    S = ContactState.parse
+    a, b, c, d = S("l1-e1"), S("v1-e1"), S("l4-e1"), S("v4-e1")
+    plan = [Transition("air-move", FREE, a), Transition("tip", a, b), Transition("tip", b, c)]
+    # the first step starts from a fixed pose: the transition itself
+    assert _culprits(plan, 0, set()) == [plan[0]]
+    # a later step: only right after its predecessor
+    assert _culprits(plan, 2, set()) == [Sequel(plan[1], plan[2])]
+    # a second different step failing after the same predecessor condemns the predecessor
+    # too, in its own context
+    known: set = {Sequel(plan[1], Transition("push", b, d))}
+    assert ESCALATE_AFTER == 2
+    assert _culprits(plan, 2, known) == [Sequel(plan[1], plan[2]), Sequel(plan[0], plan[1])]
