@@ -454,6 +454,19 @@ class SymbolicProblem:
     sequels: frozenset[Sequel] = frozenset()
 
 
+class _ClosedWorldProblem(up_model.Problem):
+    """A problem of this module: STRIPS, every predicate false unless set, only true
+    facts set. Its initial state is therefore its explicit facts, which is what
+    :attr:`initial_values` returns here: unified-planning's own property builds an
+    expression for every ground fluent (quadratic in the number of states, ~1 s per
+    problem with 80 states), and the engines we hand problems to (up-pyperplan, the PDDL
+    writer used for Fast Downward) keep only the true ones anyway."""
+
+    @property
+    def initial_values(self) -> dict[up_model.FNode, up_model.FNode]:
+        return dict(self.explicit_initial_values)
+
+
 def _copy_name(state: ContactState, after: Transition) -> str:
     """The PDDL object of ``state`` entered by ``after``: ``s-v1-e1--after-tip-s-l1-e1``."""
     return f"{state.pddl_name}--after-{after.action}-{after.from_state.pddl_name}"
@@ -484,6 +497,7 @@ def build_problem(domain: SymbolicDomain, graph: ContactGraph,
     env = _environment()
     em = env.expression_manager
     problem = domain.template.clone()
+    problem.__class__ = _ClosedWorldProblem  # same layout, closed-world initial_values
     problem.name = domain.info.name
     state_type = problem.user_type(STATE_TYPE)
 

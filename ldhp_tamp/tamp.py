@@ -291,6 +291,9 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
 #: A transition after which this many different transitions have failed is itself
 #: condemned (in its own context): the pose it leaves the object in is the likelier cause.
 ESCALATE_AFTER = 2
+#: A transition that has failed right after this many different predecessors is
+#: forbidden outright: the failure is likelier its own than theirs.
+FORBID_AFTER = 3
 
 
 def _culprits(planned: list[Transition], step: int, forbidden: set[Transition | Sequel]
@@ -300,19 +303,25 @@ def _culprits(planned: list[Transition], step: int, forbidden: set[Transition | 
     The first step starts from a fixed pose (T_0 or T'_0): the transition itself. A later
     one starts from wherever its predecessor left the object, which depends on how the
     state was entered: the pair (this step right after that one), so that other ways
-    into the state stay open. When ``ESCALATE_AFTER`` different transitions have now
-    failed right after the same predecessor, the predecessor is condemned too, in its
-    own context (the pose it produces is the common cause), and so on up the plan.
+    into the state stay open. Evidence accumulates both ways: when a step has now failed
+    right after ``FORBID_AFTER`` different predecessors, it is forbidden outright; when
+    ``ESCALATE_AFTER`` different steps have now failed right after the same predecessor,
+    the predecessor is condemned too, in its own context (the pose it produces is the
+    common cause), and so on up the plan.
     """
     out: list[Transition | Sequel] = []
     known = set(forbidden)
     while True:
+        then = planned[step]
         if step == 0:
-            out.append(planned[0])
+            out.append(then)
             return out
         after = planned[step - 1]
-        out.append(Sequel(after, planned[step]))
+        out.append(Sequel(after, then))
         known.add(out[-1])
+        if sum(1 for q in known if isinstance(q, Sequel) and q.then == then) >= FORBID_AFTER:
+            out.append(then)
+            return out
         if sum(1 for q in known if isinstance(q, Sequel) and q.after == after) < ESCALATE_AFTER:
             return out
         step -= 1

@@ -106,7 +106,7 @@ def test_cli_solve_bad_input_exits_2(tmp_path: Path, capsys) -> None:
 def test_a_failure_condemns_the_step_after_its_predecessor_and_escalates() -> None:
     from geometry.features import FREE, ContactState
     from ldhp_tamp.primitives import Sequel, Transition
-    from ldhp_tamp.tamp import ESCALATE_AFTER, _culprits
+    from ldhp_tamp.tamp import ESCALATE_AFTER, FORBID_AFTER, _culprits
 
     S = ContactState.parse
     a, b, c, d = S("l1-e1"), S("v1-e1"), S("l4-e1"), S("v4-e1")
@@ -120,3 +120,8 @@ def test_a_failure_condemns_the_step_after_its_predecessor_and_escalates() -> No
     known: set = {Sequel(plan[1], Transition("push", b, d))}
     assert ESCALATE_AFTER == 2
     assert _culprits(plan, 2, known) == [Sequel(plan[1], plan[2]), Sequel(plan[0], plan[1])]
+    # a step that has failed after three different predecessors is forbidden outright
+    assert FORBID_AFTER == 3
+    e = S("v2-e1")
+    known = {Sequel(Transition("push", e, b), plan[2]), Sequel(Transition("tip", d, b), plan[2])}
+    assert _culprits(plan, 2, known) == [Sequel(plan[1], plan[2]), plan[2]]
