@@ -25,6 +25,7 @@ import numpy as np
 from geometry.features import ContactState
 from geometry.kinematics import Motion, MotionKind, SweepEnd, sweep
 from geometry.poses import Pose, wrap_angle
+from geometry.tolerances import CONTACT_TOL
 from ldhp_tamp import budget
 from ldhp_tamp.contact_graph import PlanningContext
 from ldhp_tamp.path import Segment
@@ -85,12 +86,26 @@ def _close(a: Pose, b: Pose, radius: float) -> bool:
     return d <= ALIGN_TOL_MM and th * radius <= ALIGN_TOL_MM
 
 
+#: A motion blocked this close (mm of vertex motion) to its end still reaches it: it ends
+#: by making a contact (an alignment that settles a block flat on the floor).
+SETTLE_MM = 1e-3
+
+
 def _stays(ctx: PlanningContext, motion: Motion, s_end: float, state: ContactState) -> bool:
-    """Whether ``motion`` can run to ``s_end`` without leaving ``state``."""
+    """Whether ``motion`` can run to ``s_end`` without leaving ``state``.
+
+    A motion blocked at its very end (within ``SETTLE_MM``) counts: contact states are
+    identified within ``CONTACT_TOL``, so a block can be in the state "l1 on the floor"
+    while 0.05 degrees off flat, and the rotation that aligns it ends exactly where it
+    lands flat."""
     if s_end <= 0.0:
         return True
     sw = sweep(ctx.world, motion, s_end)
-    return sw.end is SweepEnd.LIMIT and all(p.state == state for p in sw.pieces)
+    if not all(p.state == state for p in sw.pieces):
+        return False
+    if sw.end is SweepEnd.LIMIT:
+        return True
+    return sw.end is SweepEnd.BLOCKED and (s_end - sw.s_end) * motion.vertex_speed(ctx.world) <= SETTLE_MM
 
 
 def align(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry, state: ContactState,
@@ -114,10 +129,13 @@ def align(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry,
         if "push" not in declared or abs(wrap_angle(target.theta - p.theta)) * radius > ALIGN_TOL_MM:
             return None
         d = np.array([target.x - p.x, target.y - p.y])
-        dist = float(np.linalg.norm(d))
         for motion, _, params in registry.implementation("push").families(ctx, p):
-            if np.dot(motion.direction, d) >= dist - 1e-6 and _stays(ctx, motion, dist, state):
-                return [_seg("push", state, motion, dist, ctx, params, travel=dist)]
+            # along the push line; what is left across it is a contact-tolerance offset
+            # (a block resting 0.06 mm above the floor is on the floor)
+            u = float(np.dot(motion.direction, d))
+            if u > 0.0 and float(np.linalg.norm(d - u * np.asarray(motion.direction))) <= CONTACT_TOL \
+                    and _stays(ctx, motion, u, state):
+                return [_seg("push", state, motion, u, ctx, params, travel=u)]
         return None
 
     # a translation alone

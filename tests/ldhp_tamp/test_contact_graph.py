@@ -267,3 +267,21 @@ def test_dead_ends_are_recorded_by_step(task2, domain) -> None:
     stats = StreamStats()
     assert list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), stats)) == []
     assert set(stats.dead_steps) == {1} and not stats.budget_exhausted
+
+
+def test_the_alignment_settles_a_block_that_is_in_contact_within_tolerance(task2, domain) -> None:
+    """A block in state l1-e1 may be 0.05 degrees off flat and 0.06 mm above the floor
+    (contacts are identified within CONTACT_TOL): the alignment to a flat target rotates
+    it until it lands flat, then pushes it along the floor; what is left across the push
+    is the contact-tolerance offset."""
+    from ldhp_tamp.streams import align
+
+    _, ctx = task2
+    off = Pose(150.0, 0.06, -0.00086)  # v1 0.06 mm up, v2 on the floor
+    assert contact_state(ctx.world, off) == S("l1-e1")
+    target = Pose(20.0, 0.0008, 0.0)  # T'_g of task 2's start (1 um back-off)
+    moves = align(ctx, domain.info, REGISTRY, S("l1-e1"), off, target)
+    assert moves is not None and [m.primitive for m in moves] == ["tip", "push"]
+    end = moves[-1].end
+    assert abs(end.theta) < 1e-9 and abs(end.x - 20.0) < 1e-6 and abs(end.y - target.y) <= 0.1
+    check_joined(tuple(moves))
