@@ -125,9 +125,7 @@ class PlanningContext:
     def states(self) -> tuple[ContactState, ...]:
         """The graph's nodes, sorted by name."""
         s = {w.state for w in self.witnesses}
-        s |= {self.start_contact.state, self.goal_contact.state}
-        if self.start_free or self.goal_free:
-            s.add(FREE)
+        s |= {self.start_contact.state, self.goal_contact.state, FREE}  # air-moves reach free
         return tuple(sorted(s, key=lambda x: x.name))
 
     @cached_property

@@ -302,7 +302,8 @@ class PathSearch:
     def _level(self, k: int, pose: Pose, prefix: tuple[Segment, ...]) -> "_Level":
         t = self.transitions[k]
         pre: tuple[Segment, ...] = ()
-        if t.action == "air-move" and t.to_state.is_free:
+        if t.action == "air-move" and t.to_state.is_free and self.ctx.goal_free \
+                and t.from_state == self.ctx.goal_contact.state:
             # Sub-step 2 before Sub-step 3: align with T'_g within the state, then leave it.
             tail = align(self.ctx, self.domain, self.registry, t.from_state, pose, self.ctx.goal_contact.pose)
             if tail is None:
@@ -330,14 +331,16 @@ class PathSearch:
         self.stats.dead_ends[self.transitions[k]] += 1
         self.stats.dead_steps[k] += 1
 
-    def _sample(self, impl: object, t: Transition, pose: Pose) -> list[Segment] | None:
-        """One stream call within the work budget (``None`` once it is spent)."""
+    def _sample(self, impl: object, t: Transition, pose: Pose) -> list[tuple[Segment, ...]] | None:
+        """One stream call within the work budget (``None`` once it is spent). A sample is
+        one segment, or several joined ones (an air-move over and down onto the goal)."""
         if self.stats.sample_calls >= self.max_sample_calls:
             self.stats.budget_exhausted = True
             return None
         self.stats.sample_calls += 1
-        return list(impl.sample(self.ctx, t.from_state, t.to_state, pose,  # type: ignore[attr-defined]
-                                self.rng, self.limit))
+        return [s if isinstance(s, tuple) else (s,)
+                for s in impl.sample(self.ctx, t.from_state, t.to_state, pose,  # type: ignore[attr-defined]
+                                     self.rng, self.limit)]
 
     def _candidates(self, t: Transition, pose: Pose) -> Iterator[tuple[Segment, ...]]:
         """A transition's stream: the primitive's own samples from ``pose``; when it has
@@ -346,17 +349,18 @@ class PathSearch:
         impl = self.registry.implementation(t.action)
         own = self._sample(impl, t, pose)
         if own:
-            yield from ((seg,) for seg in own)
+            yield from own
         if own is None or own or t.from_state.is_free:
             return
         scored: list[tuple[float, int, tuple[Segment, ...]]] = []
         for pre in reposition(self.ctx, self.domain, self.registry, t.from_state, pose)[:MAX_REPOSITIONS]:
             self.stats.repositions += 1
-            segs = self._sample(impl, t, pre.end)
-            if segs is None:
+            samples = self._sample(impl, t, pre.end)
+            if samples is None:
                 break
-            for seg in segs:
-                scored.append((float(self.ctx.goal_distance(seg.poses[-1:])[0]), len(scored), (pre, seg)))
+            for moves in samples:
+                end = moves[-1].poses[-1:]
+                scored.append((float(self.ctx.goal_distance(end)[0]), len(scored), (pre,) + moves))
         scored.sort(key=lambda x: (x[0], x[1]))
         for _, _, moves in scored[:self.limit]:
             yield moves

@@ -28,7 +28,8 @@ from geometry.contacts import contact_points, principal_contacts
 from geometry.features import FREE, Contact, ContactKind, ContactState
 from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, kept_contact_holds, rotate_about, sweep, translate, two_contact
 from geometry.poses import Pose, wrap_angle
-from geometry.world import World
+from geometry.tolerances import CONTACT_TOL
+from geometry.world import PolylineGripper, TwoPointGripper, World
 from ldhp_tamp import budget
 from ldhp_tamp.path import Segment
 from ldhp_tamp.primitives.registry import REGISTRY, Family
@@ -273,10 +274,59 @@ class BiplanarSlide(_Swept):
         return out
 
 
+#: Clearance (mm) kept above the environment by an air-move that carries the object over
+#: it, besides the gripper's own reach below the object (its fingers may hang lower).
+AIR_CLEARANCE_MM = 10.0
+#: How far (mm) the admissibility sweeps of lifts and placements go: enough to leave a
+#: resting contact (CONTACT_TOL) several times over.
+AIR_PROBE_MM = 5.0
+
+
+def _env_top(world: World, x0: float, x1: float) -> float:
+    """Highest environment point (mm) over the vertical strip x0 <= x <= x1 (-inf if none)."""
+    top = -math.inf
+    for (ax, ay), (bx, by) in world.environment.edges:
+        lo, hi = (ax, bx) if ax <= bx else (bx, ax)
+        if hi < x0 or lo > x1:
+            continue
+        if abs(bx - ax) < 1e-12:
+            top = max(top, ay, by)
+            continue
+        for x in (max(lo, x0), min(hi, x1)):
+            top = max(top, ay + (by - ay) * (x - ax) / (bx - ax))
+    return top
+
+
+def _gripper_drop(world: World) -> float:
+    """How far (mm) the gripper may reach below the object it holds: a finger's extent."""
+    grip = world.gripper
+    if isinstance(grip, PolylineGripper):
+        v = grip.finger.vertices
+        return float(np.max(np.linalg.norm(v[:, None, :] - v[None, :, :], axis=2)))
+    assert isinstance(grip, TwoPointGripper)
+    return 2.0 * float(grip.finger_radius)
+
+
+def _same_orientation(ctx: PlanningContext, a: Pose, b: Pose) -> bool:
+    """Whether ``a`` and ``b`` differ by a translation (to AIR_MOVE_ANGLE_MM of vertex motion)."""
+    return abs(float(wrap_angle(a.theta - b.theta))) * ctx.world.object.polygon.radius <= AIR_MOVE_ANGLE_MM
+
+
 @REGISTRY.register("air-move", Family.MOVE_OBJECT)
 class AirMove:
-    """Free-space motion: from the start pose down to its contact pose T'_0, and from the
-    goal contact pose T'_g to the goal pose (paper, Step 1 and Sub-step 3)."""
+    """Free-space motion between contact and non-contact (paper, Table I: params are
+    waypoints; the object touches nothing in between). Translations only: the model has
+    no rotation in the air.
+
+    - Step 1 and Sub-step 3: from a start pose in the air down to its contact pose T'_0,
+      and from the goal contact pose T'_g up to a goal pose in the air (one straight
+      translation each, collision-free by construction of the contact poses).
+    - Lift and place, when the goal is a contact pose: out of a contact state straight up
+      (``s -> free``), and from the air onto the goal (``free -> goal state``): over to
+      above the goal at the height reached, then straight down onto it. A lift is only
+      useful at the goal's orientation (the placement cannot rotate), so it is admitted
+      from the states with a witness at that orientation.
+    """
 
     name = "air-move"
 
@@ -286,27 +336,106 @@ class AirMove:
             pairs.add((FREE, ctx.start_contact.state))
         if ctx.goal_free:
             pairs.add((ctx.goal_contact.state, FREE))
+            return pairs
+        up = (0.0, 1.0)
+        if _leaves_to_free(ctx, ctx.goal, ctx.goal_contact.state, up):
+            pairs.add((FREE, ctx.goal_contact.state))  # placed from above
+        for state in ctx.states:
+            if state.is_free:
+                continue
+            budget.check(ctx.deadline, "the setup (air-move transitions)")
+            if any(_same_orientation(ctx, w, ctx.goal) and _leaves_to_free(ctx, w, state, up)
+                   for w in ctx.witness_poses(state)):
+                pairs.add((state, FREE))  # lifted straight up
         return pairs
 
     def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
-               start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment]:
-        if from_state.is_free:
-            target = ctx.start_contact.pose
-        elif to_state.is_free:
-            target = ctx.goal
-        else:
+               start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment | tuple[Segment, ...]]:
+        if from_state.is_free and ctx.start_free and to_state == ctx.start_contact.state:
+            seg = self._straight(ctx, from_state, to_state, start_pose, ctx.start_contact.pose)
+            if seg is not None:
+                yield seg
+        if to_state.is_free and ctx.goal_free:
+            seg = self._straight(ctx, from_state, to_state, start_pose, ctx.goal)
+            if seg is not None:
+                yield seg
+        if ctx.goal_free:
             return
+        if from_state.is_free and to_state == ctx.goal_contact.state:
+            legs = self._place(ctx, to_state, start_pose)
+            if legs is not None:
+                yield legs
+        elif to_state.is_free and not from_state.is_free:
+            seg = self._lift(ctx, from_state, start_pose)
+            if seg is not None:
+                yield seg
+
+    def _straight(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
+                  start_pose: Pose, target: Pose) -> Segment | None:
+        """The Step-1 translation to ``target``."""
         d = np.array([target.x - start_pose.x, target.y - start_pose.y])
         dist = float(np.linalg.norm(d))
         # An in-state alignment reaches T'_g's orientation to within AIR_MOVE_ANGLE_MM of
         # vertex motion, not exactly: a translation then ends that close to the goal.
-        dth = abs(float(wrap_angle(target.theta - start_pose.theta)))
-        if dth * ctx.world.object.polygon.radius > AIR_MOVE_ANGLE_MM or dist < 1e-9:
+        if not _same_orientation(ctx, start_pose, target) or dist < 1e-9:
             if dist >= 1e-9:
                 log.debug("air-move needs a rotation of %.4f degrees; only translations are modelled",
-                          math.degrees(dth))
-            return
-        m = translate(start_pose, d)
-        yield Segment(self.name, from_state, to_state, m, 0.0, dist, ctx.world,
-                      {"waypoints": [list(start_pose.to_degrees()), list(target.to_degrees())],
-                       "travel": round(dist, 6)})
+                          math.degrees(abs(float(wrap_angle(target.theta - start_pose.theta)))))
+            return None
+        return Segment(self.name, from_state, to_state, translate(start_pose, d), 0.0, dist, ctx.world,
+                       {"waypoints": [list(start_pose.to_degrees()), list(target.to_degrees())],
+                        "travel": round(dist, 6)})
+
+    def _lift(self, ctx: PlanningContext, from_state: ContactState, start_pose: Pose) -> Segment | None:
+        """Straight up until the object, and the gripper below it, clear the environment
+        between here and the goal."""
+        if not _same_orientation(ctx, start_pose, ctx.goal):
+            return None
+        here, there = ctx.world.object_vertices(start_pose), ctx.world.object_vertices(ctx.goal)
+        x0 = float(min(here[:, 0].min(), there[:, 0].min()))
+        x1 = float(max(here[:, 0].max(), there[:, 0].max()))
+        clear = _env_top(ctx.world, x0, x1) + AIR_CLEARANCE_MM + _gripper_drop(ctx.world)
+        h = max(clear - float(here[:, 1].min()), AIR_PROBE_MM)
+        m = translate(start_pose, (0.0, 1.0))
+        sw = sweep(ctx.world, m, h)
+        if sw.end is not SweepEnd.LIMIT or sw.states[-1] != FREE or any(
+                st not in (from_state, FREE) for st in sw.states):
+            return None
+        end = m.pose(h)
+        return Segment(self.name, from_state, FREE, m, 0.0, h, ctx.world,
+                       {"waypoints": [list(start_pose.to_degrees()), list(end.to_degrees())],
+                        "travel": round(h, 6), "lift": True})
+
+    def _place(self, ctx: PlanningContext, to_state: ContactState, start_pose: Pose) -> tuple[Segment, ...] | None:
+        """Over to above the goal at this height, then straight down onto it."""
+        goal = ctx.goal
+        if not _same_orientation(ctx, start_pose, goal) or start_pose.y <= goal.y:
+            return None
+        legs: list[Segment] = []
+        dx = goal.x - start_pose.x
+        above = Pose(goal.x, start_pose.y, start_pose.theta)
+        if abs(dx) > 1e-9:
+            over = translate(start_pose, (math.copysign(1.0, dx), 0.0))
+            sw = sweep(ctx.world, over, abs(dx))
+            if sw.end is not SweepEnd.LIMIT or any(not st.is_free for st in sw.states):
+                return None
+            legs.append(Segment(self.name, FREE, FREE, over, 0.0, abs(dx), ctx.world,
+                                {"waypoints": [list(start_pose.to_degrees()), list(above.to_degrees())],
+                                 "travel": round(abs(dx), 6)}))
+        drop = above.y - goal.y
+        down = translate(above, (0.0, -1.0))
+        sw = sweep(ctx.world, down, drop + AIR_PROBE_MM)
+        if sw.end is not SweepEnd.BLOCKED or sw.states[-1] != to_state or abs(sw.s_end - drop) > CONTACT_TOL \
+                or any(not st.is_free for st in sw.states[:-1]):
+            return None
+        end = down.pose(sw.s_end)
+        legs.append(Segment(self.name, FREE, to_state, down, 0.0, sw.s_end, ctx.world,
+                            {"waypoints": [list(above.to_degrees()), list(end.to_degrees())],
+                             "travel": round(sw.s_end, 6), "place": True}))
+        return tuple(legs)
+
+
+def _leaves_to_free(ctx: PlanningContext, pose: Pose, state: ContactState, direction: tuple[float, float]) -> bool:
+    """Whether a translation from ``pose`` (in ``state``) goes straight into free space."""
+    sw = sweep(ctx.world, translate(pose, direction), AIR_PROBE_MM, step_mm=1.0, refine_bits=10)
+    return sw.end is SweepEnd.LIMIT and sw.states[0] == state and sw.states[-1] == FREE and len(sw.states) == 2

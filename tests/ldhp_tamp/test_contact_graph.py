@@ -285,3 +285,36 @@ def test_the_alignment_settles_a_block_that_is_in_contact_within_tolerance(task2
     end = moves[-1].end
     assert abs(end.theta) < 1e-9 and abs(end.x - 20.0) < 1e-6 and abs(end.y - target.y) <= 0.1
     check_joined(tuple(moves))
+
+
+def test_air_moves_lift_and_place_when_the_goal_is_a_contact_pose(domain) -> None:
+    """With the goal in contact, air-move leaves every state whose witness at the goal's
+    orientation lifts straight into free space, and enters the goal's state from above;
+    with the goal in the air, only the Step-1 moves exist."""
+    peg = load_scenario(scenarios_dir() / "cmgmp_peg_in_hole.toml")
+    ctx = build_context(peg.world, peg.start, peg.goal)
+    pairs = admissible_transitions(ctx, domain.info, REGISTRY)["air-move"]
+    assert (FREE, ctx.goal_contact.state) in pairs  # lowered into the hole
+    assert (ctx.start_contact.state, FREE) in pairs  # the standing peg is lifted
+    lifted = {a for a, b in pairs if b == FREE}
+    # a state is lifted from only at the goal's orientation (0 degrees here)
+    for state in lifted:
+        assert any(abs(w.theta - peg.goal.theta) < 1e-6 for w in ctx.witness_poses(state))
+    lift = load_scenario(scenarios_dir() / "task1_zero_mobility_lift.toml")
+    ctx1 = build_context(lift.world, lift.start, lift.goal)
+    assert admissible_transitions(ctx1, domain.info, REGISTRY)["air-move"] == {(ctx1.goal_contact.state, FREE)}
+
+
+def test_a_placement_goes_over_then_straight_down(domain) -> None:
+    peg = load_scenario(scenarios_dir() / "cmgmp_peg_in_hole.toml")
+    ctx = build_context(peg.world, peg.start, peg.goal)
+    plan = [Transition("air-move", ctx.start_state, FREE), Transition("air-move", FREE, ctx.goal_state)]
+    path = next(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats()))
+    up, over, down = path.segments
+    assert (up.motion.direction, over.motion.direction, down.motion.direction) == ((0.0, 1.0), (1.0, 0.0), (0.0, -1.0))
+    assert up.to_state == over.from_state == over.to_state == down.from_state == FREE
+    end = down.end
+    assert abs(end.x - peg.goal.x) < 1e-9 and abs(end.y - peg.goal.y) < 0.1 and end.theta == peg.goal.theta
+    check_joined(path.segments)
+    for seg in path.segments:
+        assert not object_env_overlap(peg.world, seg.poses).any()

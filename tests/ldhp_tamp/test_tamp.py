@@ -125,3 +125,11 @@ def test_a_failure_condemns_the_step_after_its_predecessor_and_escalates() -> No
     e = S("v2-e1")
     known = {Sequel(Transition("push", e, b), plan[2]), Sequel(Transition("tip", d, b), plan[2])}
     assert _culprits(plan, 2, known) == [Sequel(plan[1], plan[2]), plan[2]]
+
+
+def test_a_peg_is_lifted_and_lowered_into_a_hole() -> None:
+    sc = load_scenario(scenarios_dir() / "cmgmp_peg_in_hole.toml")
+    result = solve(sc)
+    assert result.status is SolveStatus.SOLVED, result.reason
+    assert [s.primitive for s in result.plan.steps] == ["air-move"] * 3
+    assert validate_plan(result.plan, sc).valid
