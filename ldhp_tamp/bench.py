@@ -144,7 +144,12 @@ class BenchOptions:
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One run: what the worker needs (picklable, no heavy objects)."""
+    """One run: what the worker needs (picklable, no heavy objects).
+
+    ``plan_file``: where the worker writes the run's plan (solved or failed) with
+    :func:`ldhp_tamp.plan.write_plan`; ``None`` (what :func:`plan_runs` makes) keeps no
+    plan. A run stopped at the hard limit, or one that raises, writes none.
+    """
 
     index: int
     scenario_file: str
@@ -154,6 +159,7 @@ class RunSpec:
     samples_per_edge: int
     object_vertices: int
     timeout_s: float | None = None
+    plan_file: str | None = None
 
 
 @dataclass(frozen=True)
@@ -258,7 +264,8 @@ def _row(spec: RunSpec, status: BenchStatus, reason: str, wall_s: float, **count
 
 
 def solve_run(spec: RunSpec) -> BenchRow:
-    """Run one solve in this process and describe it as a row.
+    """Run one solve in this process and describe it as a row; write its plan to
+    ``spec.plan_file`` when that is set.
 
     Raises whatever :func:`ldhp_tamp.tamp.solve` raises (the worker turns it into an
     ``error`` row).
@@ -273,6 +280,10 @@ def solve_run(spec: RunSpec) -> BenchRow:
         knobs["timeout"] = spec.timeout_s
     result = solve(scenario, SolveOptions(**knobs))
     plan = result.plan
+    if spec.plan_file is not None:
+        from ldhp_tamp.plan import write_plan
+
+        write_plan(plan, spec.plan_file)
     stats = plan.stats
     times = stats.time_s
     status = _status(result.status.value, times.get("total"), spec.timeout_s)

@@ -7,6 +7,7 @@ time limit is tested on task 1, which takes seconds, with a hard limit of 0.01 s
 from __future__ import annotations
 
 import csv
+import dataclasses
 import importlib.util
 import json
 import math
@@ -100,6 +101,24 @@ def test_a_run_that_raises_is_an_error_row_and_the_others_run(tmp_path: Path) ->
     assert "ScenarioError" in rows[0].reason and "deleted.toml" in rows[0].reason
     assert rows[1].status is BenchStatus.SOLVED
     assert seen == [1, 2]
+
+
+def test_a_run_with_a_plan_file_keeps_its_plan(tmp_path: Path) -> None:
+    from ldhp_tamp.plan import PlanStatus, read_plan
+
+    (spec,) = plan_runs([PICK], BenchOptions())
+    assert spec.plan_file is None  # the harness keeps no plan unless asked
+    kept, never = tmp_path / "pick-plan.json", tmp_path / "deleted-plan.json"
+    specs = [dataclasses.replace(spec, plan_file=str(kept)),
+             RunSpec(1, str(tmp_path / "deleted.toml"), "deleted", "pyperplan", 0, 100, 4,
+                     plan_file=str(never))]
+    rows = run_all(specs, BenchOptions(jobs=2))
+    assert [r.status for r in rows] == [BenchStatus.SOLVED, BenchStatus.ERROR]
+    plan = read_plan(kept)
+    assert plan.status is PlanStatus.SOLVED and plan.scenario == "example-pick"
+    assert len(plan.steps) == rows[0].steps and plan.stats.feasibility_checks == rows[0].feasibility_checks
+    assert not never.exists()  # a run that raised wrote no plan
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pick-plan.json"]  # no temporary file
 
 
 @pytest.mark.parametrize("argv, named", [
