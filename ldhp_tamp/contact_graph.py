@@ -20,6 +20,7 @@ import numpy as np
 
 from geometry.contacts import StateWitness, Workspace, contact_state, enumerate_contact_states, workspace_for_task
 from geometry.features import FREE, ContactState
+from geometry.grasps import GraspSet
 from geometry.kinematics import SweepEnd, sweep, translate
 from geometry.poses import Pose
 from geometry.tolerances import CONTACT_BACKOFF, CONTACT_TOL
@@ -97,6 +98,10 @@ class PlanningContext:
     transition_witnesses: int = 1
     stream_samples: int = 3
     deadline: float | None = None
+    grasps: GraspSet | None = None
+    """The enumerated grasp set, for admissibility that needs some grasp to exist (an
+    air-move lift or placement needs a grasp that carries the object); ``None``: such
+    transitions are admitted without that test."""
 
     @property
     def start_free(self) -> bool:
@@ -176,7 +181,8 @@ def proper_states(world: World, witnesses: tuple[StateWitness, ...]) -> tuple[St
 
 
 def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses: int = 1,
-                  stream_samples: int = 3, deadline: float | None = None) -> PlanningContext:
+                  stream_samples: int = 3, deadline: float | None = None,
+                  grasps: GraspSet | None = None) -> PlanningContext:
     """Steps 1-2 inputs: the workspace, contact poses T'_0 and T'_g, the enumerated states
     (without degenerate vertex-on-vertex states, see :func:`proper_states`).
 
@@ -199,7 +205,7 @@ def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses
     log.info("contact states: %d enumerated, %d kept; T'_0 in %s, T'_g in %s", len(enumerated),
              len(witnesses), start_c.state.name, goal_c.state.name)
     return PlanningContext(world, start, goal, start_c, goal_c, witnesses, workspace,
-                           transition_witnesses, stream_samples, deadline)
+                           transition_witnesses, stream_samples, deadline, grasps)
 
 
 def admissible_transitions(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry,

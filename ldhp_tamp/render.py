@@ -58,6 +58,7 @@ from geometry import collision
 from geometry.contacts import contact_points
 from geometry.errors import GeometryError
 from geometry.features import ContactState
+from geometry.grasps import GraspOptions, enumerate_grasps
 from geometry.poses import FloatArray, Pose, transform_points
 from geometry.tolerances import VALIDATE_TOL, VALIDATE_TOL_DEG
 from geometry.world import World
@@ -808,8 +809,10 @@ def contact_graph_data(plan: Plan, scenario: Scenario, build: bool = True) -> Gr
         settings = scenario.settings
         base = scenario.path.parent if scenario.path is not None else None
         domain = symbolic.load_domain(settings.domain_path or settings.domain, base)
+        # the planner's graph: its air-move lifts and placements need a carrying grasp
+        grasps = enumerate_grasps(scenario.world, GraspOptions(samples_per_edge=settings.samples_per_edge))
         try:
-            ctx = build_context(scenario.world, scenario.start, scenario.goal)
+            ctx = build_context(scenario.world, scenario.start, scenario.goal, grasps=grasps)
         except ContactPoseError as exc:
             notes.append(f"no contact-state graph: {exc}")
         else:

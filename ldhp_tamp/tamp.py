@@ -20,7 +20,7 @@ import enum
 import logging
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -169,12 +169,14 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
         return _failed(scenario, engine, f"top tier, step 1: {exc}", c, clock)
     c.contact_state_nodes = len(ctx.states)
     budget.check(deadline, "the setup (contact states)")
-    transitions = admissible_transitions(ctx, domain.info, REGISTRY)
     grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples))
+    budget.check(deadline, "the setup (grasp enumeration)")
+    ctx = replace(ctx, grasps=grasps)  # air-move lifts and placements need a carrying grasp
+    transitions = admissible_transitions(ctx, domain.info, REGISTRY)
     adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
     grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release)
     clock.setup = time.perf_counter() - clock.start
-    budget.check(deadline, "the setup (contact-state graph, grasp enumeration)")
+    budget.check(deadline, "the setup (contact-state graph, admissible transitions)")
     say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
         f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 

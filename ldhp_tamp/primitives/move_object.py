@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Iterator
 import numpy as np
 
 from geometry.contacts import contact_points, principal_contacts
+from geometry.grasps import motion_conditioned, pose_conditioned
 from geometry.features import FREE, Contact, ContactKind, ContactState
 from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, kept_contact_holds, rotate_about, sweep, translate, two_contact
 from geometry.poses import Pose, wrap_angle
@@ -338,14 +339,15 @@ class AirMove:
             pairs.add((ctx.goal_contact.state, FREE))
             return pairs
         up = (0.0, 1.0)
-        if _leaves_to_free(ctx, ctx.goal, ctx.goal_contact.state, up):
+        holders = _air_holders(ctx, ctx.goal.theta)
+        if _leaves_to_free(ctx, ctx.goal, ctx.goal_contact.state, up) and _carriable(ctx, ctx.goal, holders):
             pairs.add((FREE, ctx.goal_contact.state))  # placed from above
         for state in ctx.states:
             if state.is_free:
                 continue
             budget.check(ctx.deadline, "the setup (air-move transitions)")
             if any(_same_orientation(ctx, w, ctx.goal) and _leaves_to_free(ctx, w, state, up)
-                   for w in ctx.witness_poses(state)):
+                   and _carriable(ctx, w, holders) for w in ctx.witness_poses(state)):
                 pairs.add((state, FREE))  # lifted straight up
         return pairs
 
@@ -433,6 +435,30 @@ class AirMove:
                             {"waypoints": [list(above.to_degrees()), list(end.to_degrees())],
                              "travel": round(sw.s_end, 6), "place": True}))
         return tuple(legs)
+
+
+def _air_holders(ctx: PlanningContext, theta: float) -> np.ndarray | None:
+    """The grasps that hold the object in the air at orientation ``theta`` (the gripper
+    and gravity only: :func:`geometry.grasps.motion_conditioned` over two poses far above
+    the environment, where nothing else touches). Equilibrium depends on the orientation
+    alone, so this is computed once. ``None`` without a grasp set in the context."""
+    if ctx.grasps is None:
+        return None
+    w = ctx.workspace
+    high = np.array([0.5 * (w.xmin + w.xmax), w.ymax + 10.0 * ctx.reach, theta])
+    path = np.stack([high, high + [0.0, AIR_PROBE_MM, 0.0]])
+    return motion_conditioned(ctx.world, ctx.grasps, path, np.arange(len(ctx.grasps))).indices
+
+
+def _carriable(ctx: PlanningContext, pose: Pose, holders: np.ndarray | None) -> bool:
+    """Whether one of ``holders`` (:func:`_air_holders`) fits at the contact pose ``pose``
+    (the gripper clear of the environment, :func:`geometry.grasps.pose_conditioned`): the
+    paper's air-move precondition, "a collision-free path exists with the same g", at the
+    lift-off or touch-down pose. A block lying on the floor cannot be lifted by a pinch
+    whose lower finger would be in the floor. Without a grasp set, every pose passes."""
+    if holders is None or ctx.grasps is None:
+        return True
+    return bool(np.intersect1d(pose_conditioned(ctx.world, ctx.grasps, pose.as_array()), holders).size)
 
 
 def _leaves_to_free(ctx: PlanningContext, pose: Pose, state: ContactState, direction: tuple[float, float]) -> bool:

@@ -318,3 +318,21 @@ def test_a_placement_goes_over_then_straight_down(domain) -> None:
     check_joined(path.segments)
     for seg in path.segments:
         assert not object_env_overlap(peg.world, seg.poses).any()
+
+
+def test_lifts_and_placements_need_a_grasp_that_carries_the_object(task2, domain) -> None:
+    """Task 2's goal lies flat on the slot floor: a pinch that would carry it in the air
+    has its lower finger in the floor there, so the goal is never placed from above, nor
+    is the block lifted off the slot floor (without a grasp set, both are admitted). The
+    block lying across a lip of the slot can be pinched from above and below, and lifted."""
+    from geometry.grasps import GraspOptions, enumerate_grasps
+
+    sc, ctx = task2
+    grasps = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=20))
+    with_grasps = build_context(sc.world, sc.start, sc.goal, grasps=grasps)
+    air = admissible_transitions(with_grasps, domain.info, REGISTRY)["air-move"]
+    assert (FREE, with_grasps.start_contact.state) in air  # Step 1
+    assert (FREE, with_grasps.goal_contact.state) not in air
+    assert not any(a.contacts and all(c.env == 0 for c in a.contacts) for a, b in air if b == FREE)  # e1: the floor
+    unfiltered = admissible_transitions(ctx, domain.info, REGISTRY)["air-move"]
+    assert (FREE, ctx.goal_contact.state) in unfiltered and (ctx.goal_contact.state, FREE) in unfiltered
