@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import enum
 import logging
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 
 import numpy as np
@@ -1035,6 +1035,12 @@ class MotionGrasps:
         Quasi-static feasibility instances (grasp x sample) decided for admissibility.
     truncated : bool
         ``max_checks`` ran out: some candidates were left undecided (and not admitted).
+    rejected : ndarray of int, shape (R,)
+        Candidates found inadmissible (sorted; candidates left undecided by ``max_checks``
+        are in neither list).
+    rejected_at : ndarray of int, shape (R,)
+        For each of them, a sample (index into ``path``) at which it collides or has no
+        equilibrium: the parts of the path it was not checked on may still admit it.
     """
 
     indices: IntArray
@@ -1043,6 +1049,8 @@ class MotionGrasps:
     alpha: FloatArray
     checks: int
     truncated: bool
+    rejected: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    rejected_at: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def __len__(self) -> int:
         return int(self.indices.shape[0])
@@ -1148,7 +1156,8 @@ def _spread_order(n: int) -> IntArray:
 
 
 def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidates: ArrayLike,
-                       options: MotionCheckOptions | None = None, *, max_checks: int | None = None) -> MotionGrasps:
+                       options: MotionCheckOptions | None = None, *, max_checks: int | None = None,
+                       verified: ArrayLike = (), recheck: ArrayLike = ()) -> MotionGrasps:
     """``G_m``: the grasps that can execute a MoveObject segment, with their quality.
 
     A candidate ``g`` (normally ``G_T`` at both ends) is admissible iff at least one
@@ -1182,6 +1191,12 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     max_checks : int, optional
         Budget of feasibility instances; when it runs out the undecided candidates are
         not admitted and ``truncated`` is set.
+    verified : array_like of int, optional
+        Candidates already known to pass (a) and (c) at every sample of ``path`` except the
+        ``recheck`` ones (a bisected segment's half, whose samples are its parent's): they
+        are checked only there.
+    recheck : array_like of int, optional
+        Sample indices at which ``verified`` candidates are checked after all.
 
     Returns
     -------
@@ -1196,15 +1211,48 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         raise GeometryError(f"motion_conditioned: candidate indices must lie in [0, {len(grasps)})")
     cand = cand[(cand != NO_CONTACT) & (grasps.n_touching[cand] >= 1)]
     n_s = p.shape[0]
+    known = np.intersect1d(np.asarray(verified, dtype=np.int64).reshape(-1), cand)
+    again = np.unique(np.asarray(recheck, dtype=np.int64).reshape(-1))
+    if again.size and (again[0] < 0 or again[-1] >= n_s):
+        raise GeometryError(f"motion_conditioned: recheck samples must lie in [0, {n_s})")
+    cand = np.setdiff1d(cand, known)
 
     # (a) collision-free and (b) + (c) feasible at every sample: chunk by chunk of samples
     # spread over the path (ends and middle first), pruning the candidates that fail
     # either test before the next chunk, so that most failures cost a few samples.
-    env = _env_contacts(world, p, opts.contact_tol) if cand.size else None
+    env = _env_contacts(world, p, opts.contact_tol) if cand.size or known.size else None
     length = world.object.length_scale
-    alive = cand
     checks = 0
     truncated = False
+    rejected: list[IntArray] = []
+    rejected_at: list[IntArray] = []
+
+    def check(alive: IntArray, samples: IntArray) -> IntArray:
+        """The grasps of ``alive`` that pass at ``samples``; the others are recorded."""
+        nonlocal checks
+        if not alive.size or not samples.size:
+            return alive
+        # The quasi-static test first: it is ~10x cheaper per instance than the polyline
+        # collision test and rejects most candidates.
+        assert env is not None
+        _, allc, com = _instances(world, grasps, alive, p, env, samples)
+        ok = mechanics.feasible_batch(allc, com, length).reshape(alive.size, samples.size)
+        checks += int(ok.size)
+        bad = ~ok.all(axis=1)
+        rejected.append(alive[bad])
+        rejected_at.append(samples[np.argmin(ok[bad], axis=1)])
+        alive = alive[~bad]
+        if not alive.size:
+            return alive
+        wp = compose_batch(p[samples][None, :, :], grasps.gripper[alive][:, None, :])
+        hit = _env_overlap(world, wp.reshape(-1, 3), np.repeat(grasps.width[alive], samples.size),
+                           opts.tol).reshape(alive.size, samples.size)
+        bad = hit.any(axis=1)
+        rejected.append(alive[bad])
+        rejected_at.append(samples[np.argmax(hit[bad], axis=1)])
+        return alive[~bad]
+
+    alive = cand
     order = _spread_order(n_s)
     start, size = 0, opts.chunk
     while start < n_s:
@@ -1218,18 +1266,8 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
             alive = alive[:keep]
             if not alive.size:
                 break
-        # The quasi-static test first: it is ~10x cheaper per instance than the polyline
-        # collision test and rejects most candidates.
-        assert env is not None
-        _, allc, com = _instances(world, grasps, alive, p, env, samples)
-        ok = mechanics.feasible_batch(allc, com, length).reshape(alive.size, samples.size)
-        checks += int(ok.size)
-        alive = alive[ok.all(axis=1)]
-        if not alive.size:
-            break
-        wp = compose_batch(p[samples][None, :, :], grasps.gripper[alive][:, None, :])
-        hit = _env_overlap(world, wp.reshape(-1, 3), np.repeat(grasps.width[alive], samples.size), opts.tol)
-        alive = alive[~hit.reshape(alive.size, samples.size).any(axis=1)]
+        alive = check(alive, samples)
+    alive = np.union1d(alive, check(known, again))
 
     # Quality of the admissible grasps.
     if alive.size:
@@ -1247,5 +1285,8 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     quality = opts.w1 * (~closure).astype(float) + opts.w2 * alpha
     logger.debug("G_m: %d of %d candidates admissible over %d samples (%d feasibility checks%s)",
                  alive.size, np.asarray(candidates).size, n_s, checks, ", truncated" if truncated else "")
+    rej = np.concatenate(rejected) if rejected else np.zeros(0, dtype=np.int64)
+    rat = np.concatenate(rejected_at) if rejected_at else np.zeros(0, dtype=np.int64)
+    by = np.argsort(rej, kind="stable")
     return MotionGrasps(_ro(alive, np.int64), _ro(quality, float), _ro(closure, bool), _ro(alpha, float),
-                        checks, truncated)
+                        checks, truncated, _ro(rej[by], np.int64), _ro(rat[by], np.int64))

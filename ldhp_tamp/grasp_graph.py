@@ -472,13 +472,33 @@ class GraspPlanner:
 
     def motion_grasps(self, segment: Segment) -> tuple[MotionGrasps, int, bool]:
         """G_m of a segment (cached by its primitive and dense poses): the value, the
-        number of candidates (G_T at both ends) and whether it was computed now."""
+        number of candidates (G_T at both ends) and whether it was computed now.
+
+        A half of a bisected segment whose parent's G_m is known starts from it: its
+        samples are the parent's (:meth:`Segment.split`), so a grasp admitted on the parent
+        is admitted on the second half, and on the first half if it passes at the half's
+        last sample (where the environment's contact modes now come from the incoming
+        motion); a grasp the parent rejected at a sample of this half is rejected here
+        too (except at that last sample). Only the rest is checked in full.
+        """
         key = (segment.primitive, np.asarray(segment.poses).tobytes())
         cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]))
         hit = self._motion_sets.get(key)
         if hit is not None:
             return hit, cand.size, False
-        mg = motion_conditioned(self.world, self.grasps, segment.poses, cand, self.options.motion)
+        verified, recheck = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        parent, span = segment.parent, segment.span
+        known = None if parent is None else self._motion_sets.get((parent.primitive, np.asarray(parent.poses).tobytes()))
+        if known is not None and span is not None:
+            lo, hi = span
+            last = parent.poses.shape[0] - 1
+            verified = np.intersect1d(known.indices, cand)
+            if hi < last:  # a first half: its last sample's modes differ from the parent's
+                recheck = np.array([hi - lo])
+            inside = (known.rejected_at >= lo) & (known.rejected_at <= hi) & ~((known.rejected_at == hi) & (hi < last))
+            cand = np.setdiff1d(cand, known.rejected[inside])
+        mg = motion_conditioned(self.world, self.grasps, segment.poses, cand, self.options.motion,
+                                verified=verified, recheck=recheck)
         self._motion_sets[key] = mg
         return mg, cand.size, True
 

@@ -43,14 +43,22 @@ class Segment:
     parameters: Mapping[str, Any] = field(default_factory=dict)
     depth: int = 0  # how many bisections produced this segment
     step: int = -1  # index of the planned symbolic transition this segment realises
+    parent: "Segment | None" = field(default=None, repr=False)
+    """The segment a bisection cut this one from; its dense samples are then a slice of
+    the parent's (``span``), so what was learnt of the parent carries over."""
+    span: tuple[int, int] | None = None  # (first, last) index into the parent's samples
 
     @cached_property
     def parameter_values(self) -> FloatArray:
+        if self.parent is not None and self.span is not None:
+            return self.parent.parameter_values[self.span[0]:self.span[1] + 1]
         return dense_parameters(self.world, self.motion, self.s0, self.s1, WAYPOINT_STEP)
 
     @cached_property
     def poses(self) -> FloatArray:
         """Dense object poses (J + 1, 3) from the start to the end of the segment."""
+        if self.parent is not None and self.span is not None:
+            return self.parent.poses[self.span[0]:self.span[1] + 1]
         p = self.motion.poses(self.parameter_values)
         p.setflags(write=False)
         return p
@@ -65,19 +73,35 @@ class Segment:
 
     @property
     def refinable(self) -> bool:
-        return self.primitive in REFINABLE
+        """A contact-sensitive segment (``tip``, ``biplanar-slide``) with a sample to cut at."""
+        return self.primitive in REFINABLE and self.parameter_values.size >= 3
 
     def split(self) -> tuple["Segment", "Segment"]:
-        """Bisect the parameter range (paper: dichotomy refinement)."""
-        mid = 0.5 * (self.s0 + self.s1)
-        mid_state = contact_state(self.world, self.motion.pose(mid))
-        half = abs(self.s1 - self.s0) / 2.0
-        params = dict(self.parameters)
+        """Bisect the parameter range (paper: dichotomy refinement).
+
+        The cut is the dense sample nearest the middle of the range (at most half a
+        waypoint step, 2 mm of vertex motion, from it), so the halves' samples are the
+        parent's own: its first ``i + 1`` and its last ``J - i + 1``.
+        """
+        values = self.parameter_values
+        n = values.size
+        if n < 3:
+            raise ValueError(f"a {self.primitive} segment of {n} samples cannot be bisected")
+        i = int(np.clip(np.argmin(np.abs(values - 0.5 * (self.s0 + self.s1))), 1, n - 2))
+        mid = float(values[i])
+        mid_state = contact_state(self.world, Pose.from_array(self.poses[i]))
         key = "angle" if self.motion.kind is not MotionKind.TRANSLATE else "travel"
-        if key in params:
-            params[key] = math.degrees(half) if key == "angle" else half
-        a = replace(self, to_state=mid_state, s1=mid, parameters=params, depth=self.depth + 1)
-        b = replace(self, from_state=mid_state, s0=mid, parameters=params, depth=self.depth + 1)
+
+        def params(length: float) -> dict[str, Any]:
+            out = dict(self.parameters)
+            if key in out:
+                out[key] = math.degrees(length) if key == "angle" else length
+            return out
+
+        a = replace(self, to_state=mid_state, s1=mid, parameters=params(abs(mid - self.s0)),
+                    depth=self.depth + 1, parent=self, span=(0, i))
+        b = replace(self, from_state=mid_state, s0=mid, parameters=params(abs(self.s1 - mid)),
+                    depth=self.depth + 1, parent=self, span=(i, n - 1))
         return a, b
 
 

@@ -293,3 +293,30 @@ def test_an_empty_path_and_object_frame_grasps(pick: Scenario, pick_grasps):
     assert row["normal"].tolist() == [[1.0, 0.0], [-1.0, 0.0]]
     free = object_frame_grasp(pick.world, Pose(50.0, 5.0, 0.0), 120.0)
     assert free["part"].tolist() == [0, 0] and np.isnan(free["contact"]).all()
+
+
+def test_a_bisected_segments_halves_get_the_grasp_sets_checking_them_from_scratch_gives():
+    """The halves of a split segment have their parent's samples; their G_m is derived
+    from the parent's (only what the parent does not settle is checked) and must equal
+    the G_m of the same poses and candidates computed from nothing."""
+    from geometry.grasps import motion_conditioned
+
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=30))
+    pivot = world.object_vertices(sc.start)[1]  # v2, the corner the block tips onto
+    tip = segment(world, "tip", rotate_about(sc.start, pivot, -1), math.radians(25.0))  # v1 goes up
+    planner = GraspPlanner(world, grasps, bindings())
+    planner._prepare(np.asarray(tip.poses[0]))
+    parent, _, _ = planner.motion_grasps(tip)
+    assert len(parent) and parent.rejected.size
+    first, second = tip.split()
+    assert np.array_equal(np.concatenate([first.poses, second.poses[1:]]), tip.poses)
+    for half in (first, second, *first.split(), *second.split()):
+        derived, n_cand, fresh = planner.motion_grasps(half)
+        assert fresh
+        cand = np.intersect1d(planner.pose_grasps(half.poses[0]), planner.pose_grasps(half.poses[-1]))
+        scratch = motion_conditioned(world, planner.grasps, half.poses, cand, planner.options.motion)
+        assert np.array_equal(derived.indices, scratch.indices)
+        np.testing.assert_allclose(derived.quality, scratch.quality)
+        assert derived.checks < scratch.checks  # what the parent settled was not checked again
