@@ -1007,10 +1007,10 @@ class MotionCheckOptions:
     contact_tol: float = CONTACT_TOL
     w1: float = 1.0
     w2: float = 1.0
-    angle_iterations: int = 12
+    angle_iterations: int = 8
     chunk: int = 8
     chunk_growth: int = 2
-    alpha_samples: int = 8
+    alpha_samples: int = 4
 
     def __post_init__(self) -> None:
         if self.chunk < 1 or self.chunk_growth < 1 or self.angle_iterations < 0 or self.tol < 0 or self.contact_tol < 0:
