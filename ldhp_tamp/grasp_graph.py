@@ -785,6 +785,16 @@ class _LayerGraph:
     src_starts: IntArray
     dst_order: IntArray
     dst_starts: IntArray
+    # copies in source and in destination order, so that a Bellman-Ford round reduces
+    # contiguous runs without gathering (the keys that have edges, and where they start)
+    by_src_dst: IntArray
+    by_src_cost: FloatArray
+    src_keys: IntArray
+    src_heads: IntArray
+    by_dst_src: IntArray
+    by_dst_cost: FloatArray
+    dst_keys: IntArray
+    dst_heads: IntArray
 
     @staticmethod
     def of(cands: Sequence[_Cands], size: int) -> "_LayerGraph":
@@ -799,8 +809,10 @@ class _LayerGraph:
         so = np.argsort(src, kind="stable")
         do = np.argsort(dst, kind="stable")
         keys = np.arange(size + 1)
-        return _LayerGraph(tuple(cands), size, src, dst, cost, prim, idx, so, np.searchsorted(src[so], keys),
-                           do, np.searchsorted(dst[do], keys))
+        ss, ds = np.searchsorted(src[so], keys), np.searchsorted(dst[do], keys)
+        sk, dk = np.flatnonzero(np.diff(ss)), np.flatnonzero(np.diff(ds))
+        return _LayerGraph(tuple(cands), size, src, dst, cost, prim, idx, so, ss, do, ds,
+                           dst[so], cost[so], sk, ss[sk], src[do], cost[do], dk, ds[dk])
 
     def valid_all(self) -> NDArray[np.int8]:
         """(E,) 0 unknown, 1 feasible, -1 infeasible (current knowledge)."""
@@ -810,16 +822,6 @@ class _LayerGraph:
 
     def valid(self, prim: int, index: int) -> int:
         return int(self.cands[prim].valid[index])
-
-
-def _min_into(order: IntArray, starts: IntArray, values: FloatArray, size: int) -> FloatArray:
-    """(size,) minimum of ``values`` per key (keys sorted by ``order``, CSR ``starts``);
-    inf where a key has no value."""
-    out = np.full(size, np.inf)
-    present = np.flatnonzero(np.diff(starts))
-    if present.size:
-        out[present] = np.minimum.reduceat(values[order], starts[present])
-    return out
 
 
 def _departure_costs(layers: list[_Layer], inter: list[FloatArray], release: bool, k: int,
@@ -855,13 +857,16 @@ def _optimistic(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGr
     size = layers[0].members.shape[0]
     bwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
     nxt = None
+    valid = [g.valid_all() >= 0 for g in lg]
     for k in range(n, -1, -1):
         g = lg[k]
-        ok = g.valid_all() >= 0
+        cost = np.where(valid[k][g.src_order], g.by_src_cost, np.inf)
         h = [_departure_costs(layers, inter, release, k, nxt)]
         for _ in range(rounds):
-            vals = np.where(ok, g.cost + h[-1][g.dst], np.inf)
-            h.append(np.minimum(h[-1], _min_into(g.src_order, g.src_starts, vals, size)))
+            best = np.full(size, np.inf)
+            if g.src_keys.size:
+                best[g.src_keys] = np.minimum.reduceat(cost + h[-1][g.by_src_dst], g.src_heads)
+            h.append(np.minimum(h[-1], best))
         bwd[k] = h
         nxt = h[-1]
     fwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
@@ -869,11 +874,13 @@ def _optimistic(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGr
     arrive[start] = 0.0
     for k in range(n + 1):
         g = lg[k]
-        ok = g.valid_all() >= 0
+        cost = np.where(valid[k][g.dst_order], g.by_dst_cost, np.inf)
         f = [arrive]
         for _ in range(rounds):
-            vals = np.where(ok, f[-1][g.src] + g.cost, np.inf)
-            f.append(np.minimum(f[-1], _min_into(g.dst_order, g.dst_starts, vals, size)))
+            best = np.full(size, np.inf)
+            if g.dst_keys.size:
+                best[g.dst_keys] = np.minimum.reduceat(f[-1][g.by_dst_src] + cost, g.dst_heads)
+            f.append(np.minimum(f[-1], best))
         fwd[k] = f
         if k < n:
             arrive = np.where(layers[k + 1].members, f[-1] + inter[k], np.inf)
