@@ -325,9 +325,7 @@ def sweep(
     digits), so piece boundaries are accurate. States are identified in batched calls.
     """
     overlap = overlap_fn or _default_overlap
-    speed = max(motion.vertex_speed(world), EPS)
-    n = max(1, int(math.ceil(s_max * speed / step_mm)))
-    s = np.linspace(0.0, s_max, n + 1)
+    s = _grid(world, motion, 0.0, s_max, step_mm)
 
     def good_at(x: FloatArray) -> NDArray[np.bool_]:
         p = motion.poses(x)
@@ -340,16 +338,26 @@ def sweep(
             ok[idx] = ~overlap(world, p[idx])
         return ok
 
-    poses = motion.poses(s)
-    good = good_at(s)
-    if not good[0]:
+    # Walk in chunks that double, stopping at the first bad sample: most sweeps end (a
+    # new contact, a kept contact lost) long before s_max, and a two-contact motion's
+    # speed bound can make s_max thousands of samples.
+    first_bad: int | None = None
+    i, size = 0, 64
+    while i < s.size:
+        j = min(s.size, i + size)
+        ok = good_at(s[i:j])
+        if not ok.all():
+            first_bad = i + int(np.argmin(ok))
+            break
+        i, size = j, 2 * size
+    if first_bad == 0:
         _, masks = _state_keys(world, motion.start.as_array()[None], tol)
         return Sweep(motion, (SweepPiece(masks.state(0), 0.0, 0.0),), SweepEnd.BLOCKED)  # type: ignore[attr-defined]
-    if np.all(good):
+    if first_bad is None:
         end = SweepEnd.LIMIT
+        poses = motion.poses(s)
     else:
-        first_bad = int(np.argmin(good))
-        p_bad = poses[first_bad]
+        p_bad = motion.poses(s[first_bad:first_bad + 1])[0]
         if not np.all(np.isfinite(p_bad)):
             end = SweepEnd.DEGENERATE
         elif any(not kept_contact_holds(world, c, p_bad[None])[0] for c in motion.kept):
@@ -382,26 +390,53 @@ def sweep(
     return Sweep(motion, tuple(pieces), end)
 
 
-def dense_parameters(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> FloatArray:
-    """Parameter values from ``s0`` to ``s1`` (both included) such that no object vertex
-    moves more than ``step_mm`` between consecutive values.
+#: A two-contact motion's grid starts at most this fast (object radii of vertex motion
+#: per radian) and is subdivided where it moves faster: its speed bound is a finite
+#: difference at the start, which near a singular start is millions of mm per radian.
+TWO_CONTACT_SPEED_CAP = 8.0
+#: Most samples a grid is subdivided to.
+MAX_GRID_SAMPLES = 20_000
 
-    Starts from a uniform grid sized by the motion's vertex speed and halves every interval
-    that still moves a vertex too far (two-contact motions have a varying speed).
-    """
+
+def _vertex_steps(world: World, poses: FloatArray) -> FloatArray:
+    """(n - 1,) the largest object-vertex displacement between consecutive poses (NaN
+    where a pose is undefined)."""
     verts = world.object.polygon.vertices
+    c, sn = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    wx = c[:, None] * verts[None, :, 0] - sn[:, None] * verts[None, :, 1] + poses[:, 0:1]
+    wy = sn[:, None] * verts[None, :, 0] + c[:, None] * verts[None, :, 1] + poses[:, 1:2]
+    return np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)
+
+
+def _grid(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> FloatArray:
+    """Parameter values from ``s0`` to ``s1`` (both included) such that no object vertex
+    moves more than ``step_mm`` between consecutive values, up to the first undefined
+    pose (a two-contact singularity) and up to ``MAX_GRID_SAMPLES``.
+
+    A uniform grid sized by the motion's vertex speed (for a two-contact motion at most
+    ``TWO_CONTACT_SPEED_CAP`` radii per radian), every interval that still moves a vertex
+    too far halved, round after round.
+    """
     speed = max(motion.vertex_speed(world), EPS)
+    if motion.kind is MotionKind.TWO_CONTACT:
+        speed = min(speed, TWO_CONTACT_SPEED_CAP * world.object.polygon.radius)
     n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))
     s = np.linspace(s0, s1, n + 1)
-    for _ in range(30):
-        poses = motion.poses(s)
-        c, sn = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        wx = c[:, None] * verts[None, :, 0] - sn[:, None] * verts[None, :, 1] + poses[:, 0:1]
-        wy = sn[:, None] * verts[None, :, 0] + c[:, None] * verts[None, :, 1] + poses[:, 1:2]
-        d = np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)
-        too_far = ~(d <= step_mm)  # NaN counts as too far
-        if not np.any(too_far):
+    for _ in range(40):
+        d = _vertex_steps(world, motion.poses(s))
+        undefined = np.flatnonzero(~np.isfinite(d))
+        stop = int(undefined[0]) if undefined.size else d.size  # no refining past a singularity
+        too_far = np.zeros(d.size, dtype=bool)
+        too_far[:stop] = d[:stop] > step_mm
+        if not np.any(too_far) or s.size >= MAX_GRID_SAMPLES:
             return s
         mids = 0.5 * (s[:-1][too_far] + s[1:][too_far])
         s = np.sort(np.concatenate([s, mids]))
     return s
+
+
+def dense_parameters(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> FloatArray:
+    """Parameter values from ``s0`` to ``s1`` (both included) such that no object vertex
+    moves more than ``step_mm`` between consecutive values (:func:`_grid`; a segment's
+    motion is defined over its whole range)."""
+    return _grid(world, motion, s0, s1, step_mm)
