@@ -352,6 +352,12 @@ class PathSearch:
             yield from own
         if own is None or own or t.from_state.is_free:
             return
+        # repositioning sweeps every family of every primitive: a sample call's worth each
+        cost = len(self.domain.names(Family.MOVE_OBJECT))
+        if self.stats.sample_calls + cost > self.max_sample_calls:
+            self.stats.budget_exhausted = True
+            return
+        self.stats.sample_calls += cost
         scored: list[tuple[float, int, tuple[Segment, ...]]] = []
         for pre in reposition(self.ctx, self.domain, self.registry, t.from_state, pose)[:MAX_REPOSITIONS]:
             self.stats.repositions += 1
