@@ -79,6 +79,7 @@ class StreamStats:
     alignment_failures: Counter = field(default_factory=Counter)  # state -> count
     repositions: int = 0  # in-state repositioning motions tried
     budget_exhausted: bool = False  # the search stopped because max_sample_calls ran out
+    deepest: int = -1  # the deepest planned step the search drew samples for
 
 
 def _close(a: Pose, b: Pose, radius: float) -> bool:
@@ -285,6 +286,7 @@ class PathSearch:
                 continue
             level.seen.add(key)
             self.stats.expansions += 1
+            self.stats.deepest = max(self.stats.deepest, level.k)
             moves = tuple(replace(m, step=level.k) for m in moves)
             segments = level.prefix + level.pre + moves
             if level.k + 1 < n:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import enum
 import logging
 import time
-from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -273,7 +272,8 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
         # the failed step's other samples, only say those samples were no better.
         deepest = max(failed_steps or list(stream_stats.dead_steps), default=None)
         if deepest is None and planned and tried == 0:
-            deepest = 0  # the streams ran out of work before any dead end: blame the first step
+            # the streams ran out of work before any dead end: blame their frontier
+            deepest = min(max(stream_stats.deepest, 0), len(planned) - 1)
         if deepest is None and tried == 0:
             within = ", ".join(sorted(s.name for s in stream_stats.alignment_failures)) or ctx.goal_state.name
             return _failed(scenario, engine, "top tier, step 3: the contact-state plan needs no change of "
