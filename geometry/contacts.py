@@ -673,7 +673,7 @@ def enumerate_contact_states(
     max_contacts: int = 2,
     kinds: frozenset[ContactKind] | None = None,
 ) -> tuple[StateWitness, ...]:
-    """Contact states with one or two principal contacts realised near the task.
+    """Contact states with up to ``max_contacts`` principal contacts realised near the task.
 
     Method: for every candidate contact (object feature x relevant environment feature)
     and every pair of them, and every orientation ``theta`` on a grid (``angle_step_deg``)
@@ -684,7 +684,7 @@ def enumerate_contact_states(
     a single contact, is placed at several fractions along its feature). Candidates whose
     target contacts lie within their finite features, whose object does not overlap the
     solids (rule 3 at ``penetration_tol``) and whose *identified* state
-    (:func:`principal_contact_masks`) has one or two principal contacts, all with relevant
+    (:func:`principal_contact_masks`) has 1..``max_contacts`` principal contacts, all with relevant
     features, are collected by state. Each state keeps up to ``max_witnesses`` poses chosen
     by farthest-point sampling in (x, y, theta * object radius).
 
@@ -701,7 +701,10 @@ def enumerate_contact_states(
     penetration_tol : float
         Overlap tolerance of the non-penetration test (mm).
     max_contacts : int
-        Largest number of principal contacts of a kept state (1 or 2).
+        Largest number of principal contacts of a kept state. Poses are solved from one
+        or two target contacts; a third contact present at such a pose (a notched polygon
+        lying flat in a corner: its bottom edge on the wall, a vertex and an edge on the
+        floor) makes a three-contact state, kept with ``max_contacts=3``.
     kinds : frozenset of ContactKind, optional
         Keep only states whose contacts are all of these kinds (default: all kinds).
         ``max_contacts=1, kinds={VERTEX_EDGE, EDGE_EDGE}`` is the reading under which the
@@ -791,7 +794,7 @@ def enumerate_contact_states(
             bad |= masks.edge_vertex.any(axis=(1, 2))
         if ContactKind.EDGE_EDGE not in kinds:
             bad |= masks.edge_edge.any(axis=(1, 2))
-    keep = (count >= 1) & (count <= min(int(max_contacts), 2)) & ~bad
+    keep = (count >= 1) & (count <= int(max_contacts)) & ~bad
     poses = poses[keep]
     bits = np.concatenate([masks.vertex_edge[keep].reshape(poses.shape[0], -1),
                            masks.edge_vertex[keep].reshape(poses.shape[0], -1),

@@ -184,7 +184,8 @@ def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses
                   stream_samples: int = 3, deadline: float | None = None,
                   grasps: GraspSet | None = None) -> PlanningContext:
     """Steps 1-2 inputs: the workspace, contact poses T'_0 and T'_g, the enumerated states
-    (without degenerate vertex-on-vertex states, see :func:`proper_states`).
+    (up to three contacts at poses solved from one or two; without degenerate
+    vertex-on-vertex states, see :func:`proper_states`).
 
     Raises
     ------
@@ -200,7 +201,7 @@ def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses
         except ContactPoseError as exc:
             raise ContactPoseError(f"no contact pose for the {end}: {exc}") from None
     start_c, goal_c = found["start"], found["goal"]
-    enumerated = enumerate_contact_states(world, workspace)
+    enumerated = enumerate_contact_states(world, workspace, max_contacts=3)
     witnesses = proper_states(world, enumerated)
     log.info("contact states: %d enumerated, %d kept; T'_0 in %s, T'_g in %s", len(enumerated),
              len(witnesses), start_c.state.name, goal_c.state.name)

@@ -336,3 +336,16 @@ def test_lifts_and_placements_need_a_grasp_that_carries_the_object(task2, domain
     assert not any(a.contacts and all(c.env == 0 for c in a.contacts) for a, b in air if b == FREE)  # e1: the floor
     unfiltered = admissible_transitions(ctx, domain.info, REGISTRY)["air-move"]
     assert (FREE, ctx.goal_contact.state) in unfiltered and (ctx.goal_contact.state, FREE) in unfiltered
+
+
+def test_a_notched_polygon_lying_in_the_corner_is_a_three_contact_state(domain) -> None:
+    """The 9-gon of gen_slot_concave9 lying flat in the slot's right corner touches the wall
+    with l1 and the floor with v1 and l7 (its notch between): a three-contact state, which
+    the biplanar slide that lays it down ends in, and from which it is pushed to the goal."""
+    sc = load_scenario(scenarios_dir() / "gen_slot_concave9.toml")
+    ctx = build_context(sc.world, sc.start, sc.goal)
+    corner = S("v1-e1+l7-e1+l1-e8")
+    assert corner in ctx.state_set and len(corner.contacts) == 3
+    tr = admissible_transitions(ctx, domain.info, REGISTRY)
+    assert (S("v1-e1+v2-e8"), corner) in tr["biplanar-slide"]
+    assert (corner, ctx.goal_state) in tr["push"]
