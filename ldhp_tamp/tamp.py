@@ -329,19 +329,6 @@ def _culprits(planned: list[Transition], step: int, forbidden: set[Transition | 
         step -= 1
 
 
-def _refinement_target(segments: list[Segment], k: int | None) -> int | None:
-    """The segment to bisect when segment ``k`` has no feasible grasp: ``k`` itself if it
-    is a tip or a biplanar slide; otherwise the nearest such segment before it, so that
-    a regrasp can happen part-way through that motion (e.g. the grasp that tips a block
-    onto its corner cannot lift it, but a grasp reached in the middle of the tip can)."""
-    if k is None or not 0 <= k < len(segments):
-        return None
-    for j in range(k, -1, -1):
-        if segments[j].refinable:
-            return j
-    return None
-
-
 @dataclass(frozen=True)
 class _BottomOutcome:
     """The bottom tier's answer for one pose path: the plan steps, or the segment to
@@ -360,7 +347,6 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         return _BottomOutcome(reason="bottom tier: the object need not move (its start pose is the goal "
                                      "pose), and plans of AdjustGrasp steps alone are not searched")
     refinements = 0
-    last_failing: Segment | None = None
     while True:
         t0 = time.perf_counter()
         try:
@@ -373,20 +359,16 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         if res.status is GraspPlanStatus.SOLVED:
             return _BottomOutcome(steps=tuple(res.steps))
         k = res.failing_segment
-        seg = segments[k] if k is not None and 0 <= k < len(segments) else segments[-1]
-        target = _refinement_target(segments, k)
-        # A bisection that leaves the failure on the very same (unsplit) segment did not
-        # help; bisecting further before it rarely does (Task 1: the lift after a tip
-        # that stops at the goal angle fails however finely the tip is cut). Stop early.
-        stuck = last_failing is not None and seg is last_failing and not seg.refinable
-        last_failing = seg
-        if target is not None and refinements < l_max and not stuck:
-            segments[target:target + 1] = list(segments[target].split())
+        k = k if k is not None and 0 <= k < len(segments) else len(segments) - 1
+        seg = segments[k]
+        # The paper's rule: a failing tip or biplanar slide is bisected (up to L_max
+        # times); any other failure goes back to the top tier for another pose path.
+        if seg.refinable and refinements < l_max:
+            segments[k:k + 1] = list(seg.split())
             refinements += 1
             c.refinements += 1
             continue
         why = res.reason if res.reason.startswith("bottom tier") else f"bottom tier: {res.reason}"
         if refinements:
-            why += f" (after {refinements} dichotomy refinement(s)" + (
-                "; the last left the failure where it was)" if stuck else ")")
+            why += f" (after {refinements} dichotomy refinement(s))"
         return _BottomOutcome(segment=seg, reason=why)
