@@ -18,6 +18,7 @@ for ``tip``, edge directions for ``push``, pairs of kept contacts and senses for
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from typing import TYPE_CHECKING, Any, Iterator
@@ -339,15 +340,15 @@ class AirMove:
             pairs.add((ctx.goal_contact.state, FREE))
             return pairs
         up = (0.0, 1.0)
-        holders = _air_holders(ctx, ctx.goal.theta)
-        if _leaves_to_free(ctx, ctx.goal, ctx.goal_contact.state, up) and _carriable(ctx, ctx.goal, holders):
+        holders = functools.cache(lambda: _air_holders(ctx, ctx.goal.theta))  # only if a pose needs it
+        if _leaves_to_free(ctx, ctx.goal, ctx.goal_contact.state, up) and _carriable(ctx, ctx.goal, holders()):
             pairs.add((FREE, ctx.goal_contact.state))  # placed from above
         for state in ctx.states:
             if state.is_free:
                 continue
             budget.check(ctx.deadline, "the setup (air-move transitions)")
             if any(_same_orientation(ctx, w, ctx.goal) and _leaves_to_free(ctx, w, state, up)
-                   and _carriable(ctx, w, holders) for w in ctx.witness_poses(state)):
+                   and _carriable(ctx, w, holders()) for w in ctx.witness_poses(state)):
                 pairs.add((state, FREE))  # lifted straight up
         return pairs
 
