@@ -234,7 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EXIT_CODES_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="more log output on stderr: -v the planner's progress in detail, -vv also the engines'")
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -337,11 +338,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    # -v: the planner's INFO records; -vv: its DEBUG records and the engines' own progress
+    # (pyperplan logs on the root logger, a dozen lines per solve).
     logging.basicConfig(
-        level=logging.WARNING - 10 * min(args.verbose, 2),
+        level=logging.INFO if args.verbose >= 2 else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
+    log.setLevel(logging.WARNING - 10 * min(args.verbose, 2))
     try:
         return COMMANDS[args.command](args)
     except InputError as exc:

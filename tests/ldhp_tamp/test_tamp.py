@@ -133,3 +133,16 @@ def test_a_peg_is_lifted_and_lowered_into_a_hole() -> None:
     assert result.status is SolveStatus.SOLVED, result.reason
     assert [s.primitive for s in result.plan.steps] == ["air-move"] * 3
     assert validate_plan(result.plan, sc).valid
+
+
+def test_verbose_shows_the_planners_progress_and_vv_the_engines_too(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    def stderr(*flags: str) -> str:
+        cmd = [sys.executable, "-m", "ldhp_tamp.cli", *flags, "solve", str(PICK), "--out", str(tmp_path / "p.json")]
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=True).stderr
+
+    v, vv = stderr("-v"), stderr("-vv")
+    assert "INFO ldhp_tamp.grasp_graph:" in v and "root:" not in v  # pyperplan's progress is noise at -v
+    assert "INFO root: Search start" in vv and "DEBUG ldhp_tamp" in vv
