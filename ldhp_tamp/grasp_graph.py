@@ -481,14 +481,14 @@ class GraspPlanner:
         motion); a grasp the parent rejected at a sample of this half is rejected here
         too (except at that last sample). Only the rest is checked in full.
         """
-        key = (segment.primitive, np.asarray(segment.poses).tobytes())
+        key = _motion_key(segment)
         cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]))
         hit = self._motion_sets.get(key)
         if hit is not None:
             return hit, cand.size, False
         verified, recheck = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
         parent, span = segment.parent, segment.span
-        known = None if parent is None else self._motion_sets.get((parent.primitive, np.asarray(parent.poses).tobytes()))
+        known = None if parent is None else self._motion_sets.get(_motion_key(parent))
         if known is not None and span is not None:
             lo, hi = span
             last = parent.poses.shape[0] - 1
@@ -784,7 +784,6 @@ class _LayerGraph:
     src_order: IntArray
     src_starts: IntArray
     dst_order: IntArray
-    dst_starts: IntArray
     # copies in source and in destination order, so that a Bellman-Ford round reduces
     # contiguous runs without gathering (the keys that have edges, and where they start)
     by_src_dst: IntArray
@@ -811,7 +810,7 @@ class _LayerGraph:
         keys = np.arange(size + 1)
         ss, ds = np.searchsorted(src[so], keys), np.searchsorted(dst[do], keys)
         sk, dk = np.flatnonzero(np.diff(ss)), np.flatnonzero(np.diff(ds))
-        return _LayerGraph(tuple(cands), size, src, dst, cost, prim, idx, so, ss, do, ds,
+        return _LayerGraph(tuple(cands), size, src, dst, cost, prim, idx, so, ss, do,
                            dst[so], cost[so], sk, ss[sk], src[do], cost[do], dk, ds[dk])
 
     def valid_all(self) -> NDArray[np.int8]:
@@ -950,6 +949,11 @@ def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[F
                 picked[key].add(int(ix[j]))
                 count += 1
     return {key: np.array(sorted(v), dtype=np.int64) for key, v in picked.items() if v}
+
+
+def _motion_key(seg: Segment) -> tuple[str, bytes]:
+    """The cache key of a segment's G_m: its primitive and its dense poses."""
+    return seg.primitive, np.asarray(seg.poses).tobytes()
 
 
 def _describe(seg: Segment) -> str:

@@ -310,11 +310,11 @@ class PathSearch:
             tail = align(self.ctx, self.domain, self.registry, t.from_state, pose, self.ctx.goal_contact.pose)
             if tail is None:
                 self.stats.alignment_failures[t.from_state] += 1
-                return _Level(k, pose, prefix, (), iter(()))
+                return _Level(k, prefix, (), iter(()))
             pre = tuple(replace(a, step=k) for a in tail)
             if pre:
                 pose = pre[-1].end
-        return _Level(k, pose, prefix, pre, self._candidates(t, pose))
+        return _Level(k, prefix, pre, self._candidates(t, pose))
 
     def _finish(self, pose: Pose, segments: tuple[Segment, ...]) -> PosePath | None:
         """The complete path: ``segments`` and, when the goal is a contact pose, the
@@ -333,13 +333,20 @@ class PathSearch:
         self.stats.dead_ends[self.transitions[k]] += 1
         self.stats.dead_steps[k] += 1
 
+    def _charge(self, calls: int) -> bool:
+        """Spend ``calls`` sample calls of the work budget; ``False`` (and the budget marked
+        spent) when they do not fit."""
+        if self.stats.sample_calls + calls > self.max_sample_calls:
+            self.stats.budget_exhausted = True
+            return False
+        self.stats.sample_calls += calls
+        return True
+
     def _sample(self, impl: object, t: Transition, pose: Pose) -> list[tuple[Segment, ...]] | None:
         """One stream call within the work budget (``None`` once it is spent). A sample is
         one segment, or several joined ones (an air-move over and down onto the goal)."""
-        if self.stats.sample_calls >= self.max_sample_calls:
-            self.stats.budget_exhausted = True
+        if not self._charge(1):
             return None
-        self.stats.sample_calls += 1
         return [s if isinstance(s, tuple) else (s,)
                 for s in impl.sample(self.ctx, t.from_state, t.to_state, pose,  # type: ignore[attr-defined]
                                      self.rng, self.limit)]
@@ -355,11 +362,8 @@ class PathSearch:
         if own is None or own or t.from_state.is_free:
             return
         # repositioning sweeps every family of every primitive: a sample call's worth each
-        cost = len(self.domain.names(Family.MOVE_OBJECT))
-        if self.stats.sample_calls + cost > self.max_sample_calls:
-            self.stats.budget_exhausted = True
+        if not self._charge(len(self.domain.names(Family.MOVE_OBJECT))):
             return
-        self.stats.sample_calls += cost
         scored: list[tuple[float, int, tuple[Segment, ...]]] = []
         for pre in reposition(self.ctx, self.domain, self.registry, t.from_state, pose)[:MAX_REPOSITIONS]:
             self.stats.repositions += 1
@@ -376,11 +380,10 @@ class PathSearch:
 
 @dataclass(eq=False)
 class _Level:
-    """One level of :class:`PathSearch`: transition ``k`` from ``pose``, after ``prefix``
-    (and the in-state alignment ``pre`` before an air-move into free space)."""
+    """One level of :class:`PathSearch`: transition ``k`` after ``prefix`` (and the
+    in-state alignment ``pre`` before an air-move into free space)."""
 
     k: int
-    pose: Pose
     prefix: tuple[Segment, ...]
     pre: tuple[Segment, ...]
     candidates: Iterator[tuple[Segment, ...]]
@@ -388,11 +391,6 @@ class _Level:
     seen: set[bytes] = field(default_factory=set)  # the motions drawn so far
 
 
-def pose_paths(ctx: PlanningContext, transitions: Sequence[Transition], domain: DomainInfo,
-               registry: PrimitiveRegistry, rng: np.random.Generator, stats: StreamStats, *,
-               limit: int | None = None, max_expansions: int = MAX_EXPANSIONS,
-               max_sample_calls: int = MAX_SAMPLE_CALLS, deadline: float | None = None) -> PathSearch:
-    """The pose paths of a contact-state plan: a :class:`PathSearch` (iterate it, or call
-    its ``next(failed_step)`` to backjump after a failure)."""
-    return PathSearch(ctx, transitions, domain, registry, rng, stats, limit=limit,
-                      max_expansions=max_expansions, max_sample_calls=max_sample_calls, deadline=deadline)
+#: The pose paths of a contact-state plan (the name the stream stage had before it
+#: backjumped): iterate the search, or call its ``next(failed_step)`` after a failure.
+pose_paths = PathSearch
