@@ -415,6 +415,8 @@ class GraspPlanner:
         self._pose_sets: dict[bytes, IntArray] = {}
         self._motion_sets: dict[tuple[str, bytes], MotionGrasps] = {}
         self._cands: OrderedDict[tuple[bytes, str, bool], _Cands] = OrderedDict()
+        # a layer's candidate edges, all primitives together (keyed by the _Cands objects)
+        self._layer_graphs: OrderedDict[tuple[_Cands, ...], _LayerGraph] = OrderedDict()
 
     # ---- sets ------------------------------------------------------------------------
 
@@ -460,6 +462,7 @@ class GraspPlanner:
         self._pose_sets.clear()
         self._motion_sets.clear()
         self._cands.clear()
+        self._layer_graphs.clear()
 
     def pose_grasps(self, pose: FloatArray) -> IntArray:
         """G_T at an object pose (cached by the pose's bytes)."""
@@ -656,7 +659,7 @@ class GraspPlanner:
         or None, its edges, the optimistic cost-to-come per layer -- unchecked edges
         counted as feasible --, whether the check budget ran out)."""
         opts = self.options
-        lg = [_LayerGraph.of(c, len(ctx.grasps)) for c in cands]
+        lg = [self._layer_graph(c, len(ctx.grasps)) for c in cands]
         start = self._start_index
         exhausted = False
         while True:
@@ -677,6 +680,19 @@ class GraspPlanner:
             picks = _select(lg, fwd, bwd, best, opts.slack, opts.batch, unknown)
             self._check(ctx, layers, cands, picks, search)
         return None, [], [f[-1] for f in fwd], exhausted
+
+    def _layer_graph(self, cands: Sequence[_Cands], size: int) -> _LayerGraph:
+        """The :class:`_LayerGraph` of one layer's candidates (cached while they are:
+        what is learnt of their feasibility lives in the candidates' ``valid``)."""
+        key = tuple(cands)
+        hit = self._layer_graphs.get(key)
+        if hit is None:
+            hit = self._layer_graphs[key] = _LayerGraph.of(key, size)
+            while len(self._layer_graphs) > max(1, self.options.cache_poses):
+                self._layer_graphs.popitem(last=False)
+        else:
+            self._layer_graphs.move_to_end(key)
+        return hit
 
     def _check(self, ctx: AdjustContext, layers: list[_Layer], cands: list[list[_Cands]],
                picks: dict[tuple[int, int], IntArray], search: _Search) -> None:
