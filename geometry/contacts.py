@@ -311,9 +311,25 @@ def contact_points(world: World, pose: Pose, tol: float = CONTACT_TOL) -> Contac
     >>> cp.points.tolist(), cp.normals.tolist(), cp.mu.tolist()
     ([[80.0, 0.0], [10.0, 0.0]], [[0.0, 1.0], [0.0, 1.0]], [0.2, 0.2])
     """
-    fr = _frame(world, _as_poses(pose), float(tol))
-    masks = fr.masks
-    contacts = masks.contacts(0)
+    return _points_of(world, _frame(world, _as_poses(pose), float(tol)), 0)
+
+
+def contact_points_batch(world: World, poses: ArrayLike, tol: float = CONTACT_TOL) -> list[ContactPoints]:
+    """:func:`contact_points` at each of a batch of poses ((B, 3), radians), with the
+    contact geometry computed for the whole batch at once (chunked like
+    :func:`principal_contact_masks`)."""
+    p = _as_poses(poses)
+    chunk = max(1, 2_000_000 // max(1, world.object.n * world.environment.m))
+    out: list[ContactPoints] = []
+    for k in range(0, p.shape[0], chunk):
+        fr = _frame(world, p[k:k + chunk], float(tol))
+        out.extend(_points_of(world, fr, b) for b in range(fr.V.shape[0]))
+    return out
+
+
+def _points_of(world: World, fr: _Frame, b: int) -> ContactPoints:
+    """The point contacts at pose ``b`` of a computed frame."""
+    contacts = fr.masks.contacts(b)
     env = world.environment
     n_obj = world.object.n
     fric = world.friction
@@ -324,22 +340,22 @@ def contact_points(world: World, pose: Pose, tol: float = CONTACT_TOL) -> Contac
     Ne = env.normals
     for c_i, c in enumerate(contacts):
         if c.kind is ContactKind.VERTEX_EDGE:
-            pts.append(fr.V[0, c.obj])
+            pts.append(fr.V[b, c.obj])
             nrm.append(Ne[c.env])
             mus.append(fric.environment_mu("v", c.obj, "e", c.env, n_object=n_obj))
             idx.append(c_i)
         elif c.kind is ContactKind.EDGE_VERTEX:
             pts.append(np.array(env.vertices[c.env], dtype=float))
-            nrm.append(-fr.Nn[0, c.obj])
+            nrm.append(-fr.Nn[b, c.obj])
             mus.append(fric.environment_mu("l", c.obj, "ve", c.env, world_edges=env.vertex_edges, n_object=n_obj))
             idx.append(c_i)
         else:
             i, j = c.obj, c.env
-            P, Q = fr.V[0, i], fr.V[0, (i + 1) % n_obj]
-            uP = float(fr.u[0, i, j])
-            uQ = float(fr.u[0, (i + 1) % n_obj, j])
+            P, Q = fr.V[b, i], fr.V[b, (i + 1) % n_obj]
+            uP = float(fr.u[b, i, j])
+            uQ = float(fr.u[b, (i + 1) % n_obj, j])
             mu = fric.environment_mu("l", i, "e", j, n_object=n_obj)
-            for ue in (float(fr.ee_lo[0, i, j]), float(fr.ee_hi[0, i, j])):
+            for ue in (float(fr.ee_lo[b, i, j]), float(fr.ee_hi[b, i, j])):
                 pts.append(P + (Q - P) * (ue - uP) / (uQ - uP))
                 nrm.append(Ne[j])
                 mus.append(mu)

@@ -1076,7 +1076,7 @@ def _env_contacts(world: World, path: FloatArray, contact_tol: float) -> _EnvCon
     wall): the object stops there, so that contact is STICKING, not penetrating.
     """
     s = path.shape[0]
-    found = [contacts.contact_points(world, Pose.from_array(p), contact_tol) for p in path]
+    found = contacts.contact_points_batch(world, path, contact_tol)
     c = max([len(cp) for cp in found] + [0])
     pts = np.zeros((s, c, 2))
     nrm = np.zeros((s, c, 2))
