@@ -23,6 +23,11 @@ How the rule is evaluated quickly:
   ``t`` is the disk of radius ``r - t``, so they overlap iff ``r >= t`` and
   ``dist(c, P ⊖ t) <= r - t`` (vectorised, prepared ``shapely.dwithin``).
 - Two circles: iff ``|c1 - c2| <= (r1 - t) + (r2 - t)`` with ``r1, r2 >= t``.
+- Exact pre-filters spare most poses the GEOS geometry: a point predicate
+  (``shapely.intersects_xy``) against the target grown by a distance ``d`` as two polygons,
+  one inside the true offset region and one outside it, decides "within ``d``" for
+  points not between them; a part whose bounding-disk centre is farther than its radius
+  misses, a part with a vertex inside the target hits. Only the rest are tested as above.
 
 Rounded corners of an erosion (at concave corners of a polygon) are approximated by
 shapely with 8 segments per quarter circle; the error is below ``0.005 t``.
@@ -200,31 +205,83 @@ def _relative(frame_poses: FloatArray, poses: FloatArray) -> FloatArray:
     return np.stack([c * dx + s * dy, -s * dx + c * dy, poses[:, 2] - frame_poses[:, 2]], axis=1)
 
 
+# Exact pre-filters with GEOS point predicates (no geometry built per pose): the target
+# grown by ``d`` as a polygon inside the true offset region (its arcs are chords: a point
+# in it is within ``d``) and one outside it (grown by ``d / cos(pi / 4 q)``, plus a hair:
+# a point outside it is farther than ``d``). Only points in between are decided exactly.
+_QUAD_SEGS = 8
+_HAIR = 1e-6
+
+
+def _grown(target: ErodedShape, d: float) -> tuple[shapely.Geometry, shapely.Geometry]:
+    """(inner, outer) prepared approximations of ``target`` grown by ``d`` (cached)."""
+    per = _GROWN_CACHE.setdefault(target, {})
+    hit = per.get(d)
+    if hit is None:
+        inner = shapely.buffer(target.geometry, max(d - _HAIR, 0.0), quad_segs=_QUAD_SEGS) if d > _HAIR else \
+            shapely.Polygon()
+        outer = shapely.buffer(target.geometry, (d + _HAIR) / np.cos(np.pi / (4 * _QUAD_SEGS)) + _HAIR,
+                               quad_segs=_QUAD_SEGS)
+        shapely.prepare(inner)
+        shapely.prepare(outer)
+        hit = per[d] = (inner, outer)
+    return hit
+
+
+_GROWN_CACHE: "weakref.WeakKeyDictionary[ErodedShape, dict[float, tuple[shapely.Geometry, shapely.Geometry]]]" = \
+    weakref.WeakKeyDictionary()
+
+
 def _parts_vs_geometry(parts: tuple[FloatArray, ...], poses: FloatArray,
                        target: ErodedShape, offsets: FloatArray | None = None) -> BoolArray:
     """Whether any eroded part, placed at each pose, intersects the eroded ``target``.
 
     ``offsets`` (B, 2) shifts the parts in their own frame before the pose (finger opening).
+
+    Exact pre-filters decide most poses with point predicates: a part whose bounding
+    disk's centre is outside the target grown by the disk's radius misses it, a part with
+    a vertex inside the target hits it; only the rest are built as shapely polygons.
     """
     b = poses.shape[0]
     hit = np.zeros(b, dtype=bool)
     if b == 0 or not parts or target.is_empty:
         return hit
     for part in parts:
-        local = part[None, :, :] if offsets is None else part[None, :, :] + offsets[:, None, :]
-        world = transform_points(poses, local)
-        hit |= shapely.intersects(target.geometry, shapely.polygons(world))
+        centre = 0.5 * (part.min(axis=0) + part.max(axis=0))
+        radius = float(np.linalg.norm(part - centre, axis=1).max())
+        local_c = np.broadcast_to(centre if offsets is None else centre + offsets, (b, 2))
+        world_c = transform_points(poses, local_c[:, None, :])[:, 0, :]
+        _, outer = _grown(target, radius)
+        near = np.flatnonzero(~hit & shapely.intersects_xy(outer, world_c[:, 0], world_c[:, 1]))
+        if not near.size:
+            continue
+        local = part[None, :, :] if offsets is None else part[None, :, :] + offsets[near][:, None, :]
+        world = transform_points(poses[near], np.broadcast_to(local, (near.size,) + part.shape))
+        flat = world.reshape(-1, 2)
+        deep = shapely.intersects_xy(target.geometry, flat[:, 0], flat[:, 1]).reshape(near.size, -1).any(axis=1)
+        hit[near[deep]] = True
+        rest = np.flatnonzero(~deep)
+        if rest.size:
+            hit[near[rest]] = shapely.intersects(target.geometry, shapely.polygons(world[rest]))
     return hit
 
 
 def _circles_vs_geometry(centres: FloatArray, radius: float, target: ErodedShape) -> BoolArray:
-    """(...,) overlap of circles (centres (..., 2), one radius) with an eroded target."""
+    """(...,) overlap of circles (centres (..., 2), one radius) with an eroded target:
+    ``dist(c, target) <= radius - t``, decided by the grown-target pre-filters and, for
+    the centres between them, prepared ``shapely.dwithin``."""
     shape = centres.shape[:-1]
     t = target.tol
     if radius < t or target.is_empty or centres.size == 0:
         return np.zeros(shape, dtype=bool)
-    pts = shapely.points(centres.reshape(-1, 2))
-    return shapely.dwithin(target.geometry, pts, radius - t).reshape(shape)
+    c = centres.reshape(-1, 2)
+    lim = radius - t
+    inner, outer = _grown(target, lim)
+    out = shapely.intersects_xy(inner, c[:, 0], c[:, 1]) if not inner.is_empty else np.zeros(c.shape[0], dtype=bool)
+    unsure = np.flatnonzero(~out & shapely.intersects_xy(outer, c[:, 0], c[:, 1]))
+    if unsure.size:
+        out[unsure] = shapely.dwithin(target.geometry, shapely.points(c[unsure]), lim)
+    return out.reshape(shape)
 
 
 # --------------------------------------------------------------------------------------

@@ -288,3 +288,54 @@ def test_clearance_and_cache() -> None:
     assert polygon_env_overlap(world.environment, world.object.polygon, np.zeros((0, 3))).shape == (0,)
     with pytest.raises(ValueError):
         object_env_overlap(world, [[0, 0, 0]], -1.0)
+
+
+# --------------------------------------------------------------------------------------
+# The point-predicate pre-filters change no answer of the GEOS tests they stand before
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("tol", [0.0, 0.1, 1.0])
+def test_circle_prefilter_matches_plain_dwithin(tol: float) -> None:
+    from geometry.collision import _circles_vs_geometry
+
+    target = eroded_environment(make_world([TABLE, SLOT]).environment, tol)
+    rng = np.random.default_rng(11)
+    r = 5.0
+    lim = r - tol
+    # Random centres, plus centres at distance lim (+- a hair) of a slot wall, floor,
+    # rounded corner and lip, where the filters must hand over to GEOS.
+    c = np.column_stack([rng.uniform(-250, 550, 4000), rng.uniform(-80, 120, 4000)])
+    ref = shapely.dwithin(target.geometry, shapely.points(c), lim)
+    assert (_circles_vs_geometry(c, r, target) == ref).all()
+    base = np.array([[0.0 + tol, 40.0], [150.0, 0.0 + tol], [300.0 - tol, 40.0], [tol, tol], [0.0 - tol, 75.0 + tol]])
+    way = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [math.sqrt(0.5), math.sqrt(0.5)], [-math.sqrt(0.5), math.sqrt(0.5)]])
+    for eps in (-1e-9, 0.0, 1e-9, 1e-7, 1e-4):
+        c = base + (lim + eps) * way
+        ref = shapely.dwithin(target.geometry, shapely.points(c), lim)
+        assert (_circles_vs_geometry(c, r, target) == ref).all(), eps
+
+
+@pytest.mark.parametrize("tol", [0.0, 0.1])
+def test_polygon_prefilter_matches_plain_intersects(tol: float) -> None:
+    from geometry.collision import _parts_vs_geometry
+
+    target = eroded_environment(make_world([TABLE, SLOT]).environment, tol)
+    rng = np.random.default_rng(12)
+    for parts in (eroded_polygon(make_polygon(FINGER), tol).parts, eroded_polygon(make_polygon(BLOCK), tol).parts):
+        b = 3000
+        poses = np.column_stack([rng.uniform(-250, 550, b), rng.uniform(-60, 140, b), rng.uniform(-math.pi, math.pi, b)])
+        offsets = np.column_stack([rng.uniform(-70, 70, b), np.zeros(b)])
+        ref = np.zeros(b, dtype=bool)
+        for part in parts:
+            ref |= shapely.intersects(target.geometry, shapely.polygons(transform_points(poses, part[None] + offsets[:, None])))
+        got = _parts_vs_geometry(parts, poses, target, offsets)
+        assert (got == ref).all()
+        assert 0.05 < got.mean() < 0.95
+    # A block standing exactly on the floor, and lifted by a hair.
+    parts = eroded_polygon(make_polygon(BLOCK), tol).parts
+    poses = np.array([[100.0, y, 0.0] for y in (-2 * tol, -tol, -1e-9, 0.0, 1e-9, tol)])
+    ref = np.zeros(len(poses), dtype=bool)
+    for part in parts:
+        ref |= shapely.intersects(target.geometry, shapely.polygons(transform_points(poses, part[None])))
+    assert (_parts_vs_geometry(parts, poses, target) == ref).all()
