@@ -1117,13 +1117,14 @@ def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray,
     fmode = np.broadcast_to(np.where(touch, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
                             .astype(np.int8)[:, None, :], (a, k, 2))
     b = a * k
-    fingers = mechanics.Contacts.make(fp.reshape(b, 2, 2), fn.reshape(b, 2, 2), fmu.reshape(b, 2), fmode.reshape(b, 2))
+    fingers = mechanics.Contacts.trusted(fp.reshape(b, 2, 2), fn.reshape(b, 2, 2), fmu.reshape(b, 2),
+                                         fmode.reshape(b, 2))
     ce = env.points.shape[1]
 
     def env_rep(x: np.ndarray) -> np.ndarray:
         return np.broadcast_to(x[samples][None], (a,) + x[samples].shape).reshape((b,) + x.shape[1:])
 
-    allc = mechanics.Contacts.make(
+    allc = mechanics.Contacts.trusted(
         np.concatenate([env_rep(env.points), fingers.points], axis=1),
         np.concatenate([env_rep(env.normals), fingers.normals], axis=1),
         np.concatenate([env_rep(env.mu), fingers.mu], axis=1),

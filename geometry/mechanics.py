@@ -238,6 +238,21 @@ class Contacts:
             raise GeometryError(f"contacts: {int(bad.sum())} present contact(s) have a non-unit normal")
         return cls(_frozen(p, float), _frozen(n, float), _frozen(m, float), _frozen(md, np.int8), _frozen(s, float))
 
+    @classmethod
+    def trusted(
+        cls,
+        points: FloatArray,
+        normals: FloatArray,
+        mu: FloatArray,
+        modes: ModeArray,
+        slide_dirs: FloatArray | None = None,
+    ) -> "Contacts":
+        """Wrap arrays already of shape (B, C, 2) / (B, C) and valid by construction (the
+        batched checks' own instances, built from validated contacts and grasps), without
+        :meth:`make`'s validation and copies. The caller must not modify them after."""
+        s = np.zeros(points.shape) if slide_dirs is None else slide_dirs
+        return cls(points, normals, mu, modes, s)
+
     @property
     def batch(self) -> int:
         """Number of instances B."""

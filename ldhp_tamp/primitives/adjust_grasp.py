@@ -1014,7 +1014,7 @@ def _supported(ctx: AdjustContext, layer: LayerData, smp: MotionSamples, idx: In
     mu = np.concatenate([np.broadcast_to(layer.env_mu, (b, ce)), smp.mu[rows]], axis=1)
     modes = np.concatenate([np.full((b, ce), mechanics.ContactMode.STICKING, np.int8), smp.mode[rows]], axis=1)
     slide = np.concatenate([np.zeros((b, ce, 2)), rot(smp.slide[rows])], axis=1)
-    contacts = mechanics.Contacts.make(pts, nrm, mu, modes, slide)
+    contacts = mechanics.Contacts.trusted(pts, nrm, mu, modes, slide)
     com = Pose.from_array(t).apply(world.object.com)
     ok[dec] = mechanics.feasible_batch(contacts, com, world.object.length_scale)
     return ok, b
