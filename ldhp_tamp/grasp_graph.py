@@ -655,17 +655,19 @@ class GraspPlanner:
     def _search(self, ctx: AdjustContext, layers: list[_Layer], inter: list[FloatArray], cands: list[list[_Cands]],
                 search: _Search, deadline: float | None = None
                 ) -> tuple[list[tuple[int, int]] | None, list[Any], list[FloatArray], bool]:
-        """LazySP over the layered graph (see :func:`_optimistic`): returns (the node path
+        """LazySP over the layered graph (see :class:`_Optimistic`): returns (the node path
         or None, its edges, the optimistic cost-to-come per layer -- unchecked edges
         counted as feasible --, whether the check budget ran out)."""
         opts = self.options
         lg = [self._layer_graph(c, len(ctx.grasps)) for c in cands]
         start = self._start_index
         exhausted = False
+        opt = _Optimistic(layers, inter, lg, start, self.goal_release, opts.max_intra_depth)
+        dirty: set[int] = set(range(len(layers)))
         while True:
             search.rounds += 1
             budget.check(deadline, "the bottom tier's grasp-graph search")
-            fwd, bwd = _optimistic(layers, inter, lg, start, self.goal_release, opts.max_intra_depth)
+            fwd, bwd = opt.update(dirty)
             best = float(bwd[0][-1][start])
             if not math.isfinite(best):
                 return None, [], [f[-1] for f in fwd], False
@@ -677,8 +679,14 @@ class GraspPlanner:
             if search.checked >= opts.max_edge_checks:
                 exhausted = True
                 break
-            picks = _select(lg, fwd, bwd, best, opts.slack, opts.batch, unknown)
+            # LazySP's "reverse" selector, by layer: the unchecked edges of the cheapest
+            # path in its last layer that has any, with that layer's near-optimal ones.
+            # Failures cluster where the path meets the goal side (the layer whose
+            # grasps cannot carry on), so an infeasible path is refuted in few checks.
+            top = max(e[0] for e in unknown)
+            picks = _select(lg, fwd, bwd, best, opts.slack, opts.batch, [e for e in unknown if e[0] == top], layer=top)
             self._check(ctx, layers, cands, picks, search)
+            dirty = {k for k, _ in picks}
         return None, [], [f[-1] for f in fwd], exhausted
 
     def _layer_graph(self, cands: Sequence[_Cands], size: int) -> _LayerGraph:
@@ -855,8 +863,7 @@ def _departure_costs(layers: list[_Layer], inter: list[FloatArray], release: boo
     return np.where(layers[k].members, inter[k] + next_cost, np.inf)
 
 
-def _optimistic(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph], start: int, release: bool,
-                rounds: int) -> tuple[list[list[FloatArray]], list[list[FloatArray]]]:
+class _Optimistic:
     """Optimistic cost-to-come and cost-to-go over the layered candidate graph: every
     intra-pose candidate edge not known to be infeasible counts, with its exact cost.
 
@@ -867,39 +874,66 @@ def _optimistic(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGr
     at most r AdjustGrasp edges since arriving at layer k. The cost of the cheapest path
     is ``bwd[0][rounds][start]``; it is a lower bound of every feasible path's cost, and
     equals it when the path's edges turn out feasible (LazySP).
+
+    :meth:`update` recomputes after edges of some layers were checked: ``bwd`` of the
+    layers after the last of them and ``fwd`` of the layers before the first are kept.
     """
-    n = len(inter)
-    size = layers[0].members.shape[0]
-    bwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
-    nxt = None
-    valid = [g.valid_all() >= 0 for g in lg]
-    for k in range(n, -1, -1):
-        g = lg[k]
-        cost = np.where(valid[k][g.src_order], g.by_src_cost, np.inf)
-        h = [_departure_costs(layers, inter, release, k, nxt)]
-        for _ in range(rounds):
-            best = np.full(size, np.inf)
-            if g.src_keys.size:
-                best[g.src_keys] = np.minimum.reduceat(cost + h[-1][g.by_src_dst], g.src_heads)
-            h.append(np.minimum(h[-1], best))
-        bwd[k] = h
-        nxt = h[-1]
-    fwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
-    arrive = np.full(size, np.inf)
-    arrive[start] = 0.0
-    for k in range(n + 1):
-        g = lg[k]
-        cost = np.where(valid[k][g.dst_order], g.by_dst_cost, np.inf)
-        f = [arrive]
-        for _ in range(rounds):
-            best = np.full(size, np.inf)
-            if g.dst_keys.size:
-                best[g.dst_keys] = np.minimum.reduceat(f[-1][g.by_dst_src] + cost, g.dst_heads)
-            f.append(np.minimum(f[-1], best))
-        fwd[k] = f
-        if k < n:
-            arrive = np.where(layers[k + 1].members, f[-1] + inter[k], np.inf)
-    return fwd, bwd
+
+    def __init__(self, layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph], start: int,
+                 release: bool, rounds: int) -> None:
+        self.layers, self.inter, self.lg = layers, inter, lg
+        self.release, self.rounds = release, rounds
+        n = len(inter)
+        self.size = layers[0].members.shape[0]
+        self.start = start
+        self.by_src: list[FloatArray | None] = [None] * (n + 1)  # edge costs, inf when infeasible
+        self.by_dst: list[FloatArray | None] = [None] * (n + 1)
+        self.fwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
+        self.bwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
+
+    def update(self, dirty: set[int]) -> tuple[list[list[FloatArray]], list[list[FloatArray]]]:
+        """(fwd, bwd) now; ``dirty``: the layers whose edges' validity changed (all of
+        them the first time)."""
+        layers, inter, lg, size, rounds = self.layers, self.inter, self.lg, self.size, self.rounds
+        n = len(inter)
+        for k in dirty:
+            g = lg[k]
+            ok = g.valid_all() >= 0
+            self.by_src[k] = np.where(ok[g.src_order], g.by_src_cost, np.inf)
+            self.by_dst[k] = np.where(ok[g.dst_order], g.by_dst_cost, np.inf)
+        if not dirty:
+            return self.fwd, self.bwd
+        hi, lo = max(dirty), min(dirty)
+        bwd = self.bwd
+        for k in range(hi, -1, -1):
+            g = lg[k]
+            cost = self.by_src[k]
+            h = [_departure_costs(layers, inter, self.release, k, bwd[k + 1][-1] if k < n else None)]
+            for _ in range(rounds):
+                best = np.full(size, np.inf)
+                if g.src_keys.size:
+                    best[g.src_keys] = np.minimum.reduceat(cost + h[-1][g.by_src_dst], g.src_heads)
+                h.append(np.minimum(h[-1], best))
+            bwd[k] = h
+        fwd = self.fwd
+        if lo == 0:
+            arrive = np.full(size, np.inf)
+            arrive[self.start] = 0.0
+        else:
+            arrive = np.where(layers[lo].members, fwd[lo - 1][-1] + inter[lo - 1], np.inf)
+        for k in range(lo, n + 1):
+            g = lg[k]
+            cost = self.by_dst[k]
+            f = [arrive]
+            for _ in range(rounds):
+                best = np.full(size, np.inf)
+                if g.dst_keys.size:
+                    best[g.dst_keys] = np.minimum.reduceat(f[-1][g.by_dst_src] + cost, g.dst_heads)
+                f.append(np.minimum(f[-1], best))
+            fwd[k] = f
+            if k < n:
+                arrive = np.where(layers[k + 1].members, f[-1] + inter[k], np.inf)
+        return fwd, bwd
 
 
 def _extract(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph], bwd: list[list[FloatArray]],
@@ -937,18 +971,19 @@ def _extract(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph
 
 
 def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[FloatArray]], best: float,
-            slack: float, batch: int, must: list[tuple[int, int, int]]) -> dict[tuple[int, int], IntArray]:
-    """The unchecked candidate edges to check next: those of the current cheapest path,
-    then every unchecked edge whose cheapest optimistic path through it costs at most
-    ``best + slack``, cheapest first, up to ``batch`` edges; grouped by (layer,
-    primitive)."""
+            slack: float, batch: int, must: list[tuple[int, int, int]], layer: int | None = None
+            ) -> dict[tuple[int, int], IntArray]:
+    """The unchecked candidate edges to check next: ``must`` (unchecked edges of the
+    current cheapest path), then every unchecked edge (of ``layer`` only, when given)
+    whose cheapest optimistic path through it costs at most ``best + slack``, cheapest
+    first, up to ``batch`` edges; grouped by (layer, primitive)."""
     picked: dict[tuple[int, int], set[int]] = defaultdict(set)
     for k, pi, i in must:
         picked[(k, pi)].add(i)
     count = len(must)
     rows = []
     for k, lay in enumerate(lg):
-        if not lay.src.size:
+        if not lay.src.size or (layer is not None and k != layer):
             continue
         unk = lay.valid_all() == 0
         f = fwd[k][-1][lay.src] + lay.cost + bwd[k][-1][lay.dst]
