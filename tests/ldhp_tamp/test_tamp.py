@@ -146,3 +146,44 @@ def test_verbose_shows_the_planners_progress_and_vv_the_engines_too(tmp_path: Pa
     v, vv = stderr("-v"), stderr("-vv")
     assert "INFO ldhp_tamp.grasp_graph:" in v and "root:" not in v  # pyperplan's progress is noise at -v
     assert "INFO root: Search start" in vv and "DEBUG ldhp_tamp" in vv
+
+
+def test_a_failing_tip_is_bisected_whether_no_grasp_or_no_reachable_grasp_executes_it() -> None:
+    """Algorithm 1: a failing tip / biplanar slide is bisected up to L_max times, both when
+    no grasp can execute it (G_m empty, the paper's text) and when no grasp reachable at
+    its start can (the book stand-up needs three such bisections); a failing segment of
+    another primitive goes straight back to the top tier."""
+    import math
+
+    from geometry.contacts import contact_state
+    from geometry.kinematics import rotate_about, translate
+    from ldhp_tamp.grasp_graph import GraspPlanResult, GraspPlanStatus
+    from ldhp_tamp.path import Segment
+    from ldhp_tamp.streams import PosePath
+    from ldhp_tamp.tamp import _bottom_tier, _Clock, _Counters
+
+    sc = load_scenario(scenarios_dir() / "task1_zero_mobility_lift.toml")
+    w = sc.world
+    motion = rotate_about(sc.start, w.object_vertices(sc.start)[1], -1)
+    end = motion.pose(math.radians(30.0))
+    tip = Segment("tip", contact_state(w, sc.start), contact_state(w, end), motion, 0.0, math.radians(30.0), w,
+                  {"angle": 30.0})
+    push = Segment("push", contact_state(w, sc.start), contact_state(w, sc.start), translate(sc.start, (1.0, 0.0)),
+                   0.0, 20.0, w, {"travel": 20.0})
+    assert tip.refinable and not push.refinable
+
+    class Stub:
+        def __init__(self, status: GraspPlanStatus) -> None:
+            self.status, self.calls = status, []
+
+        def plan(self, path, *, deadline=None):
+            self.calls.append(len(path.segments))
+            return GraspPlanResult(self.status, failing_segment=0, reason="stub")
+
+    for seg, status, calls in ((tip, GraspPlanStatus.NO_GRASP_FOR_SEGMENT, [1, 2, 3]),
+                               (tip, GraspPlanStatus.NO_PATH, [1, 2, 3]),
+                               (push, GraspPlanStatus.NO_GRASP_FOR_SEGMENT, [1])):
+        stub, c = Stub(status), _Counters()
+        out = _bottom_tier(stub, PosePath((seg,)), 2, c, _Clock(), None)
+        assert out.steps is None and out.segment is not None and "stub" in out.reason
+        assert stub.calls == calls and c.refinements == len(calls) - 1, (seg.primitive, status)
