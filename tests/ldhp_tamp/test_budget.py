@@ -254,8 +254,14 @@ def test_a_budget_shorter_than_the_setup_fails_after_it() -> None:
     t0 = time.perf_counter()
     result = solve(load_scenario(PICK), SolveOptions(timeout=1e-3))
     elapsed = time.perf_counter() - t0
-    assert result.reason.startswith("timeout: the 0.001 s budget ran out in the setup")
-    assert result.plan.stats.contact_state_nodes > 0  # what was gathered so far
+    assert result.reason.startswith("timeout: the 0.001 s budget ran out in ")
+    if "(interrupted: it has no deadline checks" in result.reason:
+        # a loaded machine: the setup's first stage outlasted the alarm's grace (0.25 s),
+        # and the alarm named the function it interrupted
+        assert result.reason.split(" ran out in ")[1].startswith(("geometry.", "ldhp_tamp."))
+    else:
+        assert result.reason.startswith("timeout: the 0.001 s budget ran out in the setup")
+        assert result.plan.stats.contact_state_nodes > 0  # what was gathered so far
     assert elapsed < 1.0 + SLACK_S
 
 
