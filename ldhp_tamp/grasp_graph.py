@@ -413,7 +413,7 @@ class GraspPlanner:
         self._start_index: int = NO_CONTACT
         self._context: AdjustContext | None = None
         self._pose_sets: dict[bytes, IntArray] = {}
-        self._motion_sets: dict[tuple[str, bytes], MotionGrasps] = {}
+        self._motion_sets: dict[tuple[str, bytes], tuple[MotionGrasps, int]] = {}  # G_m, candidates
         self._cands: OrderedDict[tuple[bytes, str, bool], _Cands] = OrderedDict()
         # a layer's candidate edges, all primitives together (keyed by the _Cands objects)
         self._layer_graphs: OrderedDict[tuple[_Cands, ...], _LayerGraph] = OrderedDict()
@@ -485,14 +485,16 @@ class GraspPlanner:
         too (except at that last sample). Only the rest is checked in full.
         """
         key = _motion_key(segment)
-        cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]))
         hit = self._motion_sets.get(key)
         if hit is not None:
-            return hit, cand.size, False
+            return hit[0], hit[1], False
+        cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]))
+        n_cand = cand.size
         verified, recheck = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
         parent, span = segment.parent, segment.span
-        known = None if parent is None else self._motion_sets.get(_motion_key(parent))
-        if known is not None and span is not None:
+        parent_hit = None if parent is None else self._motion_sets.get(_motion_key(parent))
+        known = None if parent_hit is None else parent_hit[0]
+        if known is not None and parent is not None and span is not None:
             lo, hi = span
             last = parent.poses.shape[0] - 1
             verified = np.intersect1d(known.indices, cand)
@@ -502,8 +504,8 @@ class GraspPlanner:
             cand = np.setdiff1d(cand, known.rejected[inside])
         mg = motion_conditioned(self.world, self.grasps, segment.poses, cand, self.options.motion,
                                 verified=verified, recheck=recheck)
-        self._motion_sets[key] = mg
-        return mg, cand.size, True
+        self._motion_sets[key] = (mg, n_cand)
+        return mg, n_cand, True
 
     # ---- the solve ---------------------------------------------------------------------
 
