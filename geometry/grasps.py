@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import enum
 import logging
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 
 import numpy as np
@@ -50,6 +50,7 @@ __all__ = [
     "enumerate_grasps",
     "pose_conditioned",
     "motion_conditioned",
+    "rate_motion_grasps",
 ]
 
 logger = logging.getLogger(__name__)
@@ -1041,6 +1042,9 @@ class MotionGrasps:
     rejected_at : ndarray of int, shape (R,)
         For each of them, a sample (index into ``path``) at which it collides or has no
         equilibrium: the parts of the path it was not checked on may still admit it.
+    rated : bool
+        ``quality``, ``force_closure`` and ``alpha`` are computed (otherwise NaN / False
+        placeholders: :func:`rate_motion_grasps` fills them).
     """
 
     indices: IntArray
@@ -1051,6 +1055,7 @@ class MotionGrasps:
     truncated: bool
     rejected: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     rejected_at: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    rated: bool = True
 
     def __len__(self) -> int:
         return int(self.indices.shape[0])
@@ -1158,7 +1163,7 @@ def _spread_order(n: int) -> IntArray:
 
 def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidates: ArrayLike,
                        options: MotionCheckOptions | None = None, *, max_checks: int | None = None,
-                       verified: ArrayLike = (), recheck: ArrayLike = ()) -> MotionGrasps:
+                       verified: ArrayLike = (), recheck: ArrayLike = (), rate: bool = True) -> MotionGrasps:
     """``G_m``: the grasps that can execute a MoveObject segment, with their quality.
 
     A candidate ``g`` (normally ``G_T`` at both ends) is admissible iff at least one
@@ -1198,6 +1203,9 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         are checked only there.
     recheck : array_like of int, optional
         Sample indices at which ``verified`` candidates are checked after all.
+    rate : bool
+        Compute the quality of the admissible grasps (most of the cost of an admissible
+        set); ``False`` leaves it to :func:`rate_motion_grasps` (``rated`` is then False).
 
     Returns
     -------
@@ -1270,24 +1278,47 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         alive = check(alive, samples)
     alive = np.union1d(alive, check(known, again))
 
-    # Quality of the admissible grasps.
-    if alive.size:
-        assert env is not None
-        at = np.sort(order[:max(1, opts.alpha_samples)])
-        fingers, allc, com = _instances(world, grasps, alive, p, env, at)
-        closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)
-        ang = mechanics.reaction_angle_batch(allc, com, length, iterations=opts.angle_iterations)
-        ang = ang.reshape(alive.size, at.size)
-        fin = np.isfinite(ang)  # all of them: the samples passed the same feasibility test
-        alpha = np.where(fin, ang, 0.0).sum(axis=1) / np.maximum(fin.sum(axis=1), 1)
+    if rate:
+        closure, alpha, quality = _rating(world, grasps, p, alive, env, opts)
     else:
-        closure = np.zeros(0, dtype=bool)
-        alpha = np.zeros(0)
-    quality = opts.w1 * (~closure).astype(float) + opts.w2 * alpha
+        closure, alpha, quality = np.zeros(alive.size, dtype=bool), np.full(alive.size, np.nan), np.full(alive.size, np.nan)
     logger.debug("G_m: %d of %d candidates admissible over %d samples (%d feasibility checks%s)",
                  alive.size, np.asarray(candidates).size, n_s, checks, ", truncated" if truncated else "")
     rej = np.concatenate(rejected) if rejected else np.zeros(0, dtype=np.int64)
     rat = np.concatenate(rejected_at) if rejected_at else np.zeros(0, dtype=np.int64)
     by = np.argsort(rej, kind="stable")
     return MotionGrasps(_ro(alive, np.int64), _ro(quality, float), _ro(closure, bool), _ro(alpha, float),
-                        checks, truncated, _ro(rej[by], np.int64), _ro(rat[by], np.int64))
+                        checks, truncated, _ro(rej[by], np.int64), _ro(rat[by], np.int64), rated=rate)
+
+
+def _rating(world: World, grasps: GraspSet, p: FloatArray, alive: IntArray, env: _EnvContacts | None,
+            opts: MotionCheckOptions) -> tuple[BoolArray, FloatArray, FloatArray]:
+    """(force closure, alpha, quality S) of admissible grasps ``alive`` along poses ``p``."""
+    if not alive.size:
+        return np.zeros(0, dtype=bool), np.zeros(0), np.zeros(0)
+    assert env is not None
+    order = _spread_order(p.shape[0])
+    at = np.sort(order[:max(1, opts.alpha_samples)])
+    length = world.object.length_scale
+    fingers, allc, com = _instances(world, grasps, alive, p, env, at)
+    closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)
+    ang = mechanics.reaction_angle_batch(allc, com, length, iterations=opts.angle_iterations)
+    ang = ang.reshape(alive.size, at.size)
+    fin = np.isfinite(ang)  # all of them: the samples passed the same feasibility test
+    alpha = np.where(fin, ang, 0.0).sum(axis=1) / np.maximum(fin.sum(axis=1), 1)
+    quality = opts.w1 * (~closure).astype(float) + opts.w2 * alpha
+    return closure, alpha, quality
+
+
+def rate_motion_grasps(world: World, grasps: GraspSet, path: ArrayLike, mg: MotionGrasps,
+                       options: MotionCheckOptions | None = None) -> MotionGrasps:
+    """``mg`` (from :func:`motion_conditioned` with ``rate=False`` on ``path``) with the
+    quality of its grasps, exactly as ``rate=True`` would have computed it."""
+    if mg.rated:
+        return mg
+    opts = options or MotionCheckOptions()
+    p = np.asarray(path, dtype=float).reshape(-1, 3)
+    env = _env_contacts(world, p, opts.contact_tol) if len(mg) else None
+    closure, alpha, quality = _rating(world, grasps, p, np.asarray(mg.indices), env, opts)
+    return replace(mg, quality=_ro(quality, float), force_closure=_ro(closure, bool), alpha=_ro(alpha, float),
+                   rated=True)

@@ -54,6 +54,7 @@ from geometry.grasps import (
     MotionCheckOptions,
     MotionGrasps,
     motion_conditioned,
+    rate_motion_grasps,
     pose_conditioned,
 )
 from geometry.poses import BoolArray, IntArray, Pose, compose_batch, transform_points, wrap_angle
@@ -473,9 +474,11 @@ class GraspPlanner:
             self._pose_sets[key] = hit
         return hit
 
-    def motion_grasps(self, segment: Segment) -> tuple[MotionGrasps, int, bool]:
+    def motion_grasps(self, segment: Segment, rate: bool = True) -> tuple[MotionGrasps, int, bool]:
         """G_m of a segment (cached by its primitive and dense poses): the value, the
         number of candidates (G_T at both ends) and whether it was computed now.
+        ``rate=False``: the grasps' quality may be left out (``rated`` False); it is
+        computed when a later call asks for it.
 
         A half of a bisected segment whose parent's G_m is known starts from it: its
         samples are the parent's (:meth:`Segment.split`), so a grasp admitted on the parent
@@ -487,6 +490,9 @@ class GraspPlanner:
         key = _motion_key(segment)
         hit = self._motion_sets.get(key)
         if hit is not None:
+            if rate and not hit[0].rated:
+                hit = self._motion_sets[key] = (rate_motion_grasps(self.world, self.grasps, segment.poses, hit[0],
+                                                                   self.options.motion), hit[1])
             return hit[0], hit[1], False
         cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]))
         n_cand = cand.size
@@ -503,7 +509,7 @@ class GraspPlanner:
             inside = (known.rejected_at >= lo) & (known.rejected_at <= hi) & ~((known.rejected_at == hi) & (hi < last))
             cand = np.setdiff1d(cand, known.rejected[inside])
         mg = motion_conditioned(self.world, self.grasps, segment.poses, cand, self.options.motion,
-                                verified=verified, recheck=recheck)
+                                verified=verified, recheck=recheck, rate=rate)
         self._motion_sets[key] = (mg, n_cand)
         return mg, n_cand, True
 
@@ -562,7 +568,7 @@ class GraspPlanner:
         motion_sizes = []
         for k, seg in enumerate(segments):
             budget.check(deadline, "the bottom tier, computing the grasp sets G_m")
-            mg, n_cand, fresh = self.motion_grasps(seg)
+            mg, n_cand, fresh = self.motion_grasps(seg, rate=False)
             if fresh:
                 checks += mg.checks
             motion_sizes.append(len(mg))
@@ -578,7 +584,7 @@ class GraspPlanner:
                                        layer_sizes=tuple(layer.size for layer in layers),
                                        motion_sizes=tuple(motion_sizes), timings=timings)
             cost = np.full(size, np.inf)
-            cost[mg.indices] = mg.quality
+            cost[mg.indices] = 0.0  # the quality S_g(m_k) once a path is known to exist
             inter.append(cost)
         timings["motion_sets"] = time.perf_counter() - t0
 
@@ -588,9 +594,26 @@ class GraspPlanner:
         cands = [[self._candidates(ctx, layer, prim, search) for prim in self.primitives] for layer in layers]
         timings["candidates"] = time.perf_counter() - t0
 
-        # The lazy shortest-path search.
+        # The lazy shortest-path search; first whether any optimistic path reaches the
+        # goal at all (costs do not matter for that), so that an infeasible path does not
+        # pay for the grasps' quality.
         t0 = time.perf_counter()
-        node_path, edge_path, reach, exhausted = self._search(ctx, layers, inter, cands, search, deadline)
+        lg = [self._layer_graph(c, size) for c in cands]
+        opt = _Optimistic(layers, inter, lg, self._start_index, self.goal_release, self.options.max_intra_depth)
+        opt.refresh(range(len(layers)))
+        reach = [f[-1] for f in opt.forward(0)]
+        last = reach[-1]
+        if (last[NO_CONTACT] if self.goal_release else last[layers[-1].members].min(initial=np.inf)) < np.inf:
+            t1 = time.perf_counter()
+            for k, seg in enumerate(segments):
+                mg = self.motion_grasps(seg)[0]
+                inter[k][mg.indices] = mg.quality  # opt sees it: the same arrays
+            timings["motion_sets"] += time.perf_counter() - t1
+            t0 += time.perf_counter() - t1
+            node_path, edge_path, reach, exhausted = self._search(ctx, layers, inter, cands, search, deadline, opt)
+        else:
+            search.rounds += 1
+            node_path, edge_path, exhausted = None, [], False
         timings["search"] = time.perf_counter() - t0
         checks += search.checks
         nodes = sum(layer.size for layer in layers)
@@ -655,7 +678,7 @@ class GraspPlanner:
     # ---- the lazy shortest-path search -------------------------------------------------
 
     def _search(self, ctx: AdjustContext, layers: list[_Layer], inter: list[FloatArray], cands: list[list[_Cands]],
-                search: _Search, deadline: float | None = None
+                search: _Search, deadline: float | None = None, opt: "_Optimistic | None" = None
                 ) -> tuple[list[tuple[int, int]] | None, list[Any], list[FloatArray], bool]:
         """LazySP over the layered graph (see :class:`_Optimistic`): returns (the node path
         or None, its edges, the optimistic cost-to-come per layer -- unchecked edges
@@ -664,12 +687,15 @@ class GraspPlanner:
         lg = [self._layer_graph(c, len(ctx.grasps)) for c in cands]
         start = self._start_index
         exhausted = False
-        opt = _Optimistic(layers, inter, lg, start, self.goal_release, opts.max_intra_depth)
+        fresh = opt is None  # else: its edge validity is current, its costs are not
+        if opt is None:
+            opt = _Optimistic(layers, inter, lg, start, self.goal_release, opts.max_intra_depth)
         dirty: set[int] = set(range(len(layers)))
         while True:
             search.rounds += 1
             budget.check(deadline, "the bottom tier's grasp-graph search")
-            fwd, bwd = opt.update(dirty)
+            fwd, bwd = opt.update(dirty) if fresh else opt.recompute(0, len(layers) - 1)
+            fresh = True
             best = float(bwd[0][-1][start])
             if not math.isfinite(best):
                 return None, [], [f[-1] for f in fwd], False
@@ -905,16 +931,23 @@ class _Optimistic:
     def update(self, dirty: set[int]) -> tuple[list[list[FloatArray]], list[list[FloatArray]]]:
         """(fwd, bwd) now; ``dirty``: the layers whose edges' validity changed (all of
         them the first time)."""
-        layers, inter, lg, size, rounds = self.layers, self.inter, self.lg, self.size, self.rounds
-        n = len(inter)
+        self.refresh(dirty)
+        if not dirty:
+            return self.fwd, self.bwd
+        return self.recompute(min(dirty), max(dirty))
+
+    def refresh(self, dirty: Iterable[int]) -> None:
+        """Re-read which edges of layers ``dirty`` are known infeasible."""
         for k in dirty:
-            g = lg[k]
+            g = self.lg[k]
             ok = g.valid_all() >= 0
             self.by_src[k] = np.where(ok[g.src_order], g.by_src_cost, np.inf)
             self.by_dst[k] = np.where(ok[g.dst_order], g.by_dst_cost, np.inf)
-        if not dirty:
-            return self.fwd, self.bwd
-        hi, lo = max(dirty), min(dirty)
+
+    def recompute(self, lo: int, hi: int) -> tuple[list[list[FloatArray]], list[list[FloatArray]]]:
+        """Recompute ``bwd`` of layers 0..hi and ``fwd`` of layers lo..n."""
+        layers, inter, lg, size, rounds = self.layers, self.inter, self.lg, self.size, self.rounds
+        n = len(inter)
         bwd = self.bwd
         for k in range(hi, -1, -1):
             g = lg[k]
@@ -926,6 +959,12 @@ class _Optimistic:
                     best[g.src_keys] = np.minimum.reduceat(cost + h[-1][g.by_src_dst], g.src_heads)
                 h.append(np.minimum(h[-1], best))
             bwd[k] = h
+        return self.forward(lo), bwd
+
+    def forward(self, lo: int) -> list[list[FloatArray]]:
+        """Recompute ``fwd`` of layers ``lo``..n (``by_dst`` of them must be current)."""
+        layers, inter, lg, size, rounds = self.layers, self.inter, self.lg, self.size, self.rounds
+        n = len(inter)
         fwd = self.fwd
         if lo == 0:
             arrive = np.full(size, np.inf)
@@ -944,7 +983,7 @@ class _Optimistic:
             fwd[k] = f
             if k < n:
                 arrive = np.where(layers[k + 1].members, f[-1] + inter[k], np.inf)
-        return fwd, bwd
+        return fwd
 
 
 def _extract(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph], bwd: list[list[FloatArray]],

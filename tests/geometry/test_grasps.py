@@ -625,3 +625,21 @@ def test_a_segment_that_ends_by_making_contact_can_have_grasps() -> None:
     gm = motion_conditioned(world, grasps, down, cand)
     assert gm.indices.size > 0
     assert np.all(grasps.n_touching[gm.indices] == 2)  # only pinches carry it down
+
+
+def test_rating_a_motion_set_later_gives_the_same_quality() -> None:
+    """motion_conditioned(rate=False) then rate_motion_grasps == motion_conditioned()."""
+    from geometry.grasps import rate_motion_grasps
+
+    world, gs = lift_world()
+    path = straight([0, 0, 0], [0, 20, 0])  # lifting off the table
+    cand = candidates(world, gs, path)
+    full = motion_conditioned(world, gs, path, cand)
+    bare = motion_conditioned(world, gs, path, cand, rate=False)
+    assert len(full) and full.rated and not bare.rated
+    assert np.array_equal(bare.indices, full.indices) and np.isnan(bare.quality).all()
+    rated = rate_motion_grasps(world, gs, path, bare)
+    assert rated.rated and np.array_equal(rated.indices, full.indices)
+    np.testing.assert_array_equal(rated.quality, full.quality)
+    np.testing.assert_array_equal(rated.force_closure, full.force_closure)
+    assert rate_motion_grasps(world, gs, path, rated) is rated
