@@ -469,3 +469,63 @@ def test_adding_a_primitive_as_docs_extending_says(tmp_path):
     result = solve(build_problem(domain, graph))
     assert [a.name for a in result.actions] == ["approach-contact", "roll"]
     assert result.actions[1].transition == Transition("roll", L[0], L[1])
+
+
+# --------------------------------------------------------------------------- pyperplan's grounding
+
+
+def _pyperplan_find_pred_in_init():
+    """pyperplan's own grounding._find_pred_in_init (replaced when pyperplan first runs)."""
+    import pyperplan.grounding as grounding
+
+    from ldhp_tamp import symbolic
+
+    symbolic._patch_pyperplan()
+    assert grounding._find_pred_in_init is symbolic._find_pred_in_init
+    return symbolic._REPLACED["_find_pred_in_init"]
+
+
+def test_the_indexed_static_filter_answers_as_pyperplans_regex_one():
+    """ldhp_tamp.symbolic replaces pyperplan's grounding._find_pred_in_init (a regex per
+    call, a prefix match) by an index; the answers must be the same, quirks included."""
+    import random
+
+    from ldhp_tamp import symbolic
+
+    original = _pyperplan_find_pred_in_init()
+    rng = random.Random(5)
+    names = ["s-l1-e1", "s-l1-e1_v2-e8", "s-l1-e11", "s-v1", "s-v1-e1", "a", "ab", "b-c", "s-x--after-tip-s-y"]
+    preds = ["can-tip", "can-push", "at", "can-tip-x", "touching"]
+    for trial in range(30):
+        init = frozenset(
+            f"({rng.choice(preds)}" + "".join(" " + rng.choice(names) for _ in range(rng.randint(0, 3))) + ")"
+            for _ in range(rng.randint(0, 25)))
+        for pred in preds:
+            for param in names + ["s-l1", "s", "zz"]:
+                for pos in range(3):
+                    want = original(pred, param, pos, init)
+                    assert symbolic._find_pred_in_init(pred, param, pos, init) == want, (trial, pred, param, pos)
+
+
+def test_grounding_with_the_indexed_filter_makes_the_same_operators(ldhp):
+    import pyperplan.grounding as grounding
+    from up_pyperplan.engine import EngineImpl
+
+    from ldhp_tamp import symbolic
+
+    original = _pyperplan_find_pred_in_init()
+    for graph in (lifting_graph(), _line_graph()):
+        problem = build_problem(ldhp, graph).up_problem
+        tasks = {}
+        for name, fn in (("regex", original), ("indexed", symbolic._find_pred_in_init)):
+            saved = grounding._find_pred_in_init
+            grounding._find_pred_in_init = fn
+            try:
+                eng = EngineImpl()
+                eng.pyp_types = {}
+                task = grounding.ground(eng._convert_problem(eng._convert_domain(problem), problem))
+            finally:
+                grounding._find_pred_in_init = saved
+            tasks[name] = sorted((op.name, sorted(op.preconditions), sorted(op.add_effects), sorted(op.del_effects))
+                                 for op in task.operators)
+        assert tasks["regex"] == tasks["indexed"] and len(tasks["regex"]) > 5
