@@ -311,7 +311,7 @@ def sweep(
     overlap_fn: OverlapFn | None = None,
     *,
     step_mm: float = 1.0,
-    refine_bits: int = 40,
+    refine_bits: int = 24,
     tol: float = CONTACT_TOL,
 ) -> Sweep:
     """Walk ``motion`` from ``s = 0`` to at most ``s_max`` and cut it by contact state.
