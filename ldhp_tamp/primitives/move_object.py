@@ -33,6 +33,7 @@ from geometry.poses import Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL
 from geometry.world import PolylineGripper, TwoPointGripper, World
 from ldhp_tamp import budget
+from ldhp_tamp.parallel import fork_map
 from ldhp_tamp.path import Segment
 from ldhp_tamp.primitives.registry import REGISTRY, Family
 
@@ -87,15 +88,23 @@ class _Swept:
         raise NotImplementedError
 
     def transitions(self, ctx: PlanningContext) -> set[tuple[ContactState, ContactState]]:
+        # One sweep per (witness pose, motion family), independent of each other: on the
+        # machine's cores (ldhp_tamp.parallel; the same pairs on any number of them).
+        poses = [pose for state in ctx.states if not state.is_free for pose in ctx.witness_poses(state)]
+        where = f"the setup ({self.name} transitions)"
+
+        def pairs_from(pose: Pose) -> set[tuple[ContactState, ContactState]]:
+            budget.check(ctx.deadline, where)
+            out: set[tuple[ContactState, ContactState]] = set()
+            for motion, s_max, _ in self.families(ctx, pose):
+                sw = sweep(ctx.world, motion, s_max, step_mm=TRANSITION_STEP_MM, refine_bits=10)
+                out |= _consecutive_pairs(sw)
+            return out
+
+        budget.check(ctx.deadline, where)
         pairs: set[tuple[ContactState, ContactState]] = set()
-        for state in ctx.states:
-            budget.check(ctx.deadline, f"the setup ({self.name} transitions)")
-            if state.is_free:
-                continue
-            for pose in ctx.witness_poses(state):
-                for motion, s_max, _ in self.families(ctx, pose):
-                    sw = sweep(ctx.world, motion, s_max, step_mm=TRANSITION_STEP_MM, refine_bits=10)
-                    pairs |= _consecutive_pairs(sw)
+        for found in fork_map(pairs_from, poses):
+            pairs |= found
         return pairs
 
     def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,

@@ -1,0 +1,139 @@
+"""Independent work of one solve on the machine's cores, in forked children.
+
+:func:`fork_map` applies a function to a list of items: the parent process takes one
+share, each other core a forked child, which inherits everything the parent has built
+(the world, the contact states, the grasp set) for free and sends only its results back
+through a pipe, pickled. It serves the setup's transition sweeps, hundreds of small
+independent computations of a few milliseconds each; a pool of workers would have to be
+sent the world first and would cost more than it saves.
+
+The results are those of ``[fn(x) for x in items]``, in that order, whatever the number
+of cores: each item is computed by exactly one process, by the same code. An exception
+in a child is raised again in the parent (a :class:`~ldhp_tamp.errors.TimeBudgetExceeded`
+with its stage); when the parent is interrupted (its own exception, the budget's alarm),
+the children are killed and reaped before the exception goes on.
+
+Without ``os.fork`` (not POSIX), with one core, or with few items, it runs in the parent.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import pickle
+import signal
+from typing import Callable, Sequence, TypeVar
+
+from ldhp_tamp.errors import TimeBudgetExceeded
+
+__all__ = ["cores", "fork_map"]
+
+log = logging.getLogger(__name__)
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+#: Fewer items than this per core are not worth a fork (about 10-20 ms each).
+MIN_ITEMS_PER_CORE = 16
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None) -> list[R]:
+    """``[fn(x) for x in items]``, spread over ``jobs`` processes (default: the cores).
+
+    Item i goes to process ``i % jobs`` (the parent is process 0), so that neighbouring
+    items, which tend to cost alike, are spread out.
+    """
+    items = list(items)
+    jobs = cores() if jobs is None else max(1, int(jobs))
+    jobs = min(jobs, len(items) // MIN_ITEMS_PER_CORE)
+    if jobs <= 1 or not hasattr(os, "fork"):
+        return [fn(x) for x in items]
+    children: list[tuple[int, int]] = []  # (pid, read end)
+    try:
+        for j in range(1, jobs):
+            read_end, write_end = os.pipe()
+            pid = os.fork()
+            if pid == 0:  # the child: never returns
+                try:
+                    os.close(read_end)
+                    _child(write_end, fn, items[j::jobs])
+                finally:
+                    os._exit(0)
+            os.close(write_end)
+            children.append((pid, read_end))
+        mine = [fn(x) for x in items[0::jobs]]
+        shares: list[list[R]] = [mine]
+        for j, (pid, read_end) in enumerate(children, start=1):
+            children[j - 1] = (pid, -1)  # _collect closes, reaps (and kills if need be)
+            shares.append(_collect(pid, read_end, len(items[j::jobs])))
+    finally:
+        for pid, read_end in children:  # what is left: interrupted
+            if read_end >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(read_end)
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+                with contextlib.suppress(ChildProcessError):
+                    os.waitpid(pid, 0)
+    out: list[R] = [None] * len(items)  # type: ignore[list-item]
+    for j, share in enumerate(shares):
+        out[j::jobs] = share
+    return out
+
+
+def _child(write_end: int, fn: Callable[[T], R], share: Sequence[T]) -> None:
+    """A child's work: its share of the results, or what went wrong, pickled to the pipe."""
+    signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the parent's alarm is the parent's
+    try:
+        message: tuple[str, object] = ("ok", [fn(x) for x in share])
+    except TimeBudgetExceeded as exc:
+        message = ("timeout", exc.where)
+    except BaseException as exc:  # raised again in the parent
+        try:
+            pickle.dumps(exc)
+            message = ("error", exc)
+        except Exception:
+            message = ("failed", f"{type(exc).__name__}: {exc}")
+    try:
+        data = pickle.dumps(message)
+    except Exception as exc:
+        data = pickle.dumps(("failed", f"its results cannot be pickled: {type(exc).__name__}: {exc}"))
+    with os.fdopen(write_end, "wb") as pipe:
+        pipe.write(data)
+
+
+def _collect(pid: int, read_end: int, expected: int) -> list[R]:
+    """Read a child's pickled answer to the end, reap it, return its results or raise."""
+    chunks = []
+    done = False
+    try:
+        while chunk := os.read(read_end, 1 << 16):
+            chunks.append(chunk)
+        done = True
+    finally:
+        os.close(read_end)
+        if not done:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        _, status = os.waitpid(pid, 0)
+    if not chunks:
+        raise RuntimeError(f"a worker process of the solve died (wait status {status})")
+    kind, payload = pickle.loads(b"".join(chunks))
+    if kind == "timeout":
+        raise TimeBudgetExceeded(payload)
+    if kind == "error":
+        raise payload
+    if kind == "failed":
+        raise RuntimeError(f"a worker process of the solve failed: {payload}")
+    if len(payload) != expected:
+        raise RuntimeError(f"a worker process of the solve returned {len(payload)} results, not {expected}")
+    return payload
