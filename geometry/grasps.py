@@ -1163,7 +1163,8 @@ def _spread_order(n: int) -> IntArray:
 
 def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidates: ArrayLike,
                        options: MotionCheckOptions | None = None, *, max_checks: int | None = None,
-                       verified: ArrayLike = (), recheck: ArrayLike = (), rate: bool = True) -> MotionGrasps:
+                       verified: ArrayLike = (), recheck: ArrayLike = (), rate: bool = True,
+                       free_at: ArrayLike = ()) -> MotionGrasps:
     """``G_m``: the grasps that can execute a MoveObject segment, with their quality.
 
     A candidate ``g`` (normally ``G_T`` at both ends) is admissible iff at least one
@@ -1206,6 +1207,10 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     rate : bool
         Compute the quality of the admissible grasps (most of the cost of an admissible
         set); ``False`` leaves it to :func:`rate_motion_grasps` (``rated`` is then False).
+    free_at : array_like of int, optional
+        Samples at which every candidate is known to be collision-free (the segment's
+        ends when the candidates are G_T there at a tolerance at most ``tol``): (a) is not
+        tested again there.
 
     Returns
     -------
@@ -1225,6 +1230,7 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     if again.size and (again[0] < 0 or again[-1] >= n_s):
         raise GeometryError(f"motion_conditioned: recheck samples must lie in [0, {n_s})")
     cand = np.setdiff1d(cand, known)
+    free = np.unique(np.asarray(free_at, dtype=np.int64).reshape(-1))
 
     # (a) collision-free and (b) + (c) feasible at every sample: chunk by chunk of samples
     # spread over the path (ends and middle first), pruning the candidates that fail
@@ -1251,7 +1257,8 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         rejected.append(alive[bad])
         rejected_at.append(samples[np.argmin(ok[bad], axis=1)])
         alive = alive[~bad]
-        if not alive.size:
+        samples = samples[~np.isin(samples, free)]
+        if not alive.size or not samples.size:
             return alive
         wp = compose_batch(p[samples][None, :, :], grasps.gripper[alive][:, None, :])
         hit = _env_overlap(world, wp.reshape(-1, 3), np.repeat(grasps.width[alive], samples.size),

@@ -508,8 +508,11 @@ class GraspPlanner:
                 recheck = np.array([hi - lo])
             inside = (known.rejected_at >= lo) & (known.rejected_at <= hi) & ~((known.rejected_at == hi) & (hi < last))
             cand = np.setdiff1d(cand, known.rejected[inside])
+        # The candidates are G_T at both ends: collision-free there if G_T's tolerance is
+        # at most G_m's (a smaller tolerance is the stricter rule).
+        ends = (0, segment.poses.shape[0] - 1) if self.options.adjust.tol <= self.options.motion.tol else ()
         mg = motion_conditioned(self.world, self.grasps, segment.poses, cand, self.options.motion,
-                                verified=verified, recheck=recheck, rate=rate)
+                                verified=verified, recheck=recheck, rate=rate, free_at=ends)
         self._motion_sets[key] = (mg, n_cand)
         return mg, n_cand, True
 

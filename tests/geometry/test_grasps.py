@@ -643,3 +643,16 @@ def test_rating_a_motion_set_later_gives_the_same_quality() -> None:
     np.testing.assert_array_equal(rated.quality, full.quality)
     np.testing.assert_array_equal(rated.force_closure, full.force_closure)
     assert rate_motion_grasps(world, gs, path, rated) is rated
+
+
+def test_samples_known_collision_free_are_not_tested_again_and_change_nothing() -> None:
+    world, gs = lift_world()
+    path = straight([0, 0, 0], [0, 20, 0])
+    cand = candidates(world, gs, path)  # G_T at both ends
+    plain = motion_conditioned(world, gs, path, cand)
+    ends = motion_conditioned(world, gs, path, cand, free_at=(0, len(path) - 1))
+    assert len(plain) and np.array_equal(ends.indices, plain.indices)
+    np.testing.assert_array_equal(ends.quality, plain.quality)
+    # with every sample declared free, only the quasi-static test decides: a superset
+    loose = motion_conditioned(world, gs, path, cand, free_at=np.arange(len(path)))
+    assert set(plain.indices) <= set(loose.indices)
