@@ -561,7 +561,7 @@ class GraspPlanner:
             members[self.pose_grasps(p)] = True
             if k == 0:
                 members[self._start_index] = True
-            layers.append(_Layer(k, p, p.tobytes(), members, int(members.sum()), states[k], members & ctx.holds(p)))
+            layers.append(_Layer(k, p, p.tobytes(), members, int(members.sum()), states[k], ctx.holds(p, members)))
         timings["pose_sets"] = time.perf_counter() - t0
 
         # G_m per segment, in order; stop at the first empty one.

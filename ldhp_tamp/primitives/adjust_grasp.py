@@ -626,39 +626,48 @@ class AdjustContext:
         home = np.array([0.5 * (lo + hi), top + reach + self.options.home_margin, 0.0])
         return LayerData(p.copy(), cp.points, cp.normals, cp.mu, rests, home, w_home)
 
-    def holds(self, pose: Pose | ArrayLike) -> BoolArray:
+    def holds(self, pose: Pose | ArrayLike, among: BoolArray | None = None) -> BoolArray:
         """(G,) whether each grasp, standing still at object pose ``pose``, keeps the
         object still: the environment contacts and the grasp's finger contacts (all
         STICKING) balance the weight (row 0 and grasps touching nothing: the object
         rests on the environment alone). Every intra-pose edge starts and ends with this
-        test, so a grasp failing it has no intra-pose edge at that pose. Cached per pose."""
+        test, so a grasp failing it has no intra-pose edge at that pose.
+
+        ``among``: a (G,) mask; only those grasps are decided (the others read False), so
+        that a layer pays only for its G_T. Decisions are cached per pose."""
         layer = self.layer(pose)
+        gs = self.grasps
         key = ("holds", layer.pose.tobytes())
         hit = self._cache.get(key)
-        if hit is not None:
-            return hit
-        gs = self.grasps
-        out = np.full(len(gs), layer.rests_alone, dtype=bool)
-        rows = np.flatnonzero(gs.n_touching >= 1)
-        if rows.size:
-            b = rows.size
-            ce = layer.env_points.shape[0]
-            t = layer.pose
-            pose_t = Pose.from_array(t)
-            fp = pose_t.apply(np.nan_to_num(gs.contact[rows]))
-            fn = pose_t.apply_vector(np.nan_to_num(gs.normal[rows]))
-            touch = gs.touching[rows]
-            contacts = mechanics.Contacts.make(
-                np.concatenate([np.broadcast_to(layer.env_points, (b, ce, 2)), fp], axis=1),
-                np.concatenate([np.broadcast_to(layer.env_normals, (b, ce, 2)), np.where(touch[..., None], fn, 0.0)], axis=1),
-                np.concatenate([np.broadcast_to(layer.env_mu, (b, ce)), self.mu[rows]], axis=1),
-                np.concatenate([np.full((b, ce), mechanics.ContactMode.STICKING, np.int8),
-                                np.where(touch, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
-                                .astype(np.int8)], axis=1))
-            out[rows] = mechanics.feasible_batch(contacts, pose_t.apply(self.world.object.com),
-                                                 self.world.object.length_scale)
+        if hit is None:
+            hit = self._cache[key] = (np.zeros(len(gs), dtype=bool), np.zeros(len(gs), dtype=bool))
+        known, value = hit
+        want = np.ones(len(gs), dtype=bool) if among is None else np.asarray(among, dtype=bool)
+        todo = want & ~known
+        if todo.any():
+            value[todo & (gs.n_touching == 0)] = layer.rests_alone
+            rows = np.flatnonzero(todo & (gs.n_touching >= 1))
+            if rows.size:
+                b = rows.size
+                ce = layer.env_points.shape[0]
+                t = layer.pose
+                pose_t = Pose.from_array(t)
+                fp = pose_t.apply(np.nan_to_num(gs.contact[rows]))
+                fn = pose_t.apply_vector(np.nan_to_num(gs.normal[rows]))
+                touch = gs.touching[rows]
+                contacts = mechanics.Contacts.make(
+                    np.concatenate([np.broadcast_to(layer.env_points, (b, ce, 2)), fp], axis=1),
+                    np.concatenate([np.broadcast_to(layer.env_normals, (b, ce, 2)), np.where(touch[..., None], fn, 0.0)],
+                                   axis=1),
+                    np.concatenate([np.broadcast_to(layer.env_mu, (b, ce)), self.mu[rows]], axis=1),
+                    np.concatenate([np.full((b, ce), mechanics.ContactMode.STICKING, np.int8),
+                                    np.where(touch, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
+                                    .astype(np.int8)], axis=1))
+                value[rows] = mechanics.feasible_batch(contacts, pose_t.apply(self.world.object.com),
+                                                       self.world.object.length_scale)
+            known |= todo
+        out = value & want
         out.setflags(write=False)
-        self._cache[key] = out
         return out
 
     def cache(self, name: str, pose: FloatArray) -> dict[Any, Any]:

@@ -293,3 +293,23 @@ def test_options_are_checked():
         ag.AdjustGraspOptions(lambda1=-1.0)
     with pytest.raises(InputError, match="step"):
         ag.AdjustGraspOptions(step=0.0)
+
+
+def test_holds_among_some_grasps_decides_them_as_for_all() -> None:
+    from pathlib import Path
+
+    from ldhp_tamp.primitives.adjust_grasp import AdjustContext
+    from ldhp_tamp.scenario import load_scenario
+
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=20))
+    pose = sc.start.as_array()
+    everything = AdjustContext(sc.world, gs).holds(pose)
+    ctx = AdjustContext(sc.world, gs)
+    rng = np.random.default_rng(2)
+    some = rng.random(len(gs)) < 0.3
+    part = ctx.holds(pose, some)
+    assert np.array_equal(part, everything & some) and everything[some].any()
+    more = some | (rng.random(len(gs)) < 0.3)  # partly cached now
+    assert np.array_equal(ctx.holds(pose, more), everything & more)
+    assert np.array_equal(ctx.holds(pose), everything)
