@@ -591,20 +591,29 @@ class GraspPlanner:
             inter.append(cost)
         timings["motion_sets"] = time.perf_counter() - t0
 
-        # The candidate intra-pose edges of every layer.
-        t0 = time.perf_counter()
+        # Whether any optimistic path reaches the goal at all (costs do not matter for
+        # that), layer by layer with each layer's candidate intra-pose edges: an
+        # infeasible path pays neither for the grasps' quality nor for the candidates of
+        # the layers after the one where forward reachability dies.
         search = _Search()
-        cands = [[self._candidates(ctx, layer, prim, search) for prim in self.primitives] for layer in layers]
-        timings["candidates"] = time.perf_counter() - t0
-
-        # The lazy shortest-path search; first whether any optimistic path reaches the
-        # goal at all (costs do not matter for that), so that an infeasible path does not
-        # pay for the grasps' quality.
-        t0 = time.perf_counter()
-        lg = [self._layer_graph(c, size) for c in cands]
+        cands: list[list[_Cands]] = [[] for _ in layers]
+        lg: list[_LayerGraph] = [_LayerGraph.of((), size) for _ in layers]
         opt = _Optimistic(layers, inter, lg, self._start_index, self.goal_release, self.options.max_intra_depth)
-        opt.refresh(range(len(layers)))
-        reach = [f[-1] for f in opt.forward(0)]
+        reach = [np.full(size, np.inf) for _ in layers]
+        t_cand = t_reach = 0.0
+        for k, layer in enumerate(layers):
+            t0 = time.perf_counter()
+            cands[k] = [self._candidates(ctx, layer, prim, search) for prim in self.primitives]
+            lg[k] = self._layer_graph(cands[k], size)
+            t1 = time.perf_counter()
+            opt.refresh([k])
+            reach[k] = opt.forward(k, k)[k][-1]
+            t_reach += time.perf_counter() - t1
+            t_cand += t1 - t0
+            if not np.isfinite(reach[k]).any():
+                break
+        timings["candidates"] = t_cand
+        t0 = time.perf_counter() - t_reach
         last = reach[-1]
         if (last[NO_CONTACT] if self.goal_release else last[layers[-1].members].min(initial=np.inf)) < np.inf:
             t1 = time.perf_counter()
@@ -964,8 +973,9 @@ class _Optimistic:
             bwd[k] = h
         return self.forward(lo), bwd
 
-    def forward(self, lo: int) -> list[list[FloatArray]]:
-        """Recompute ``fwd`` of layers ``lo``..n (``by_dst`` of them must be current)."""
+    def forward(self, lo: int, hi: int | None = None) -> list[list[FloatArray]]:
+        """Recompute ``fwd`` of layers ``lo``..``hi`` (default n; ``by_dst`` of them
+        must be current, ``fwd`` of layer ``lo - 1`` too)."""
         layers, inter, lg, size, rounds = self.layers, self.inter, self.lg, self.size, self.rounds
         n = len(inter)
         fwd = self.fwd
@@ -974,7 +984,7 @@ class _Optimistic:
             arrive[self.start] = 0.0
         else:
             arrive = np.where(layers[lo].members, fwd[lo - 1][-1] + inter[lo - 1], np.inf)
-        for k in range(lo, n + 1):
+        for k in range(lo, n + 1 if hi is None else hi + 1):
             g = lg[k]
             cost = self.by_dst[k]
             f = [arrive]
