@@ -907,37 +907,12 @@ def enumerate_grasps(world: World, options: GraspOptions | None = None) -> Grasp
 # --------------------------------------------------------------------------------------
 
 
-def _reach(world: World, width: FloatArray) -> FloatArray:
-    """(B,) radius about the gripper origin of a disk holding fingers and palm at ``width``."""
-    grip = world.gripper
-    if isinstance(grip, TwoPointGripper):
-        return 0.5 * width + float(grip.finger_radius)
-    v = grip.finger.vertices
-    shifted = np.hypot(0.5 * width[:, None] + v[None, :, 0], v[None, :, 1])
-    out = shifted.max(axis=1)  # finger 1 is finger 2's mirror image
-    if grip.palm is not None:
-        out = np.maximum(out, float(np.linalg.norm(grip.palm.vertices, axis=1).max()))
-    return out
-
-
 def _env_overlap(world: World, poses: FloatArray, width: FloatArray, tol: float) -> BoolArray:
-    """:func:`collision.gripper_env_overlap` with a cheap exact pre-filter: a gripper
-    whose bounding disk (centre: origin, radius: :func:`_reach`) is outside every solid
-    and farther than ``tol`` from their edges cannot overlap them, and is not tested."""
-    env = world.environment
-    hit = np.zeros(poses.shape[0], dtype=bool)
-    if env.m == 0 or poses.shape[0] == 0:
-        return hit
-    p = poses[:, :2]
-    a, d, length = env.edges[:, 0], env.edge_directions, env.edge_lengths
-    rel = p[:, None, :] - a[None]  # (B, M, 2)
-    t = np.clip(np.sum(rel * d[None], axis=2), 0.0, length[None])
-    dist = np.linalg.norm(rel - t[..., None] * d[None], axis=2).min(axis=1)
-    inside = shapely.contains_xy(env.shapely, p[:, 0], p[:, 1])
-    maybe = np.flatnonzero(inside | (dist <= _reach(world, width) + tol))
-    if maybe.size:
-        hit[maybe] = collision.gripper_env_overlap(world, poses[maybe], width[maybe], tol)
-    return hit
+    """:func:`collision.gripper_env_overlap` (whose own pre-filters, per finger and palm,
+    decide most grippers far from or deep in the solids with point predicates)."""
+    if world.environment.m == 0 or poses.shape[0] == 0:
+        return np.zeros(poses.shape[0], dtype=bool)
+    return collision.gripper_env_overlap(world, poses, width, tol)
 
 
 # --------------------------------------------------------------------------------------
@@ -950,8 +925,7 @@ def pose_conditioned(world: World, grasps: GraspSet, pose: ArrayLike, tol: float
 
     The world gripper of grasp ``g`` is ``T * g`` at width ``g.width``; it is kept unless
     a finger or the palm overlaps the environment (plan rule 3 at ``tol``,
-    :func:`geometry.collision.gripper_env_overlap`, behind an exact bounding-disk
-    pre-filter). Widths are within limits and the
+    :func:`geometry.collision.gripper_env_overlap`). Widths are within limits and the
     fingers free of the object by construction of the set. Row 0 (no contact) is always
     kept.
 
