@@ -39,11 +39,12 @@ from __future__ import annotations
 
 import logging
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from geometry.collision import eroded_environment, object_env_overlap
 from geometry.features import Contact, ContactKind, ContactState
@@ -314,17 +315,78 @@ def contact_points(world: World, pose: Pose, tol: float = CONTACT_TOL) -> Contac
     return _points_of(world, _frame(world, _as_poses(pose), float(tol)), 0)
 
 
-def contact_points_batch(world: World, poses: ArrayLike, tol: float = CONTACT_TOL) -> list[ContactPoints]:
-    """:func:`contact_points` at each of a batch of poses ((B, 3), radians), with the
-    contact geometry computed for the whole batch at once (chunked like
-    :func:`principal_contact_masks`)."""
+def contact_point_arrays(world: World, poses: ArrayLike, tol: float = CONTACT_TOL
+                         ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """:func:`contact_points` at each of a batch of poses as padded arrays: points and
+    normals (B, C, 2), mu (B, C) and which slots are live (B, C), C the most points at
+    one pose; pose b's points in the order of ``contact_points(world, poses[b])``.
+    Vectorised over the batch (no object per pose)."""
     p = _as_poses(poses)
-    chunk = max(1, 2_000_000 // max(1, world.object.n * world.environment.m))
-    out: list[ContactPoints] = []
-    for k in range(0, p.shape[0], chunk):
-        fr = _frame(world, p[k:k + chunk], float(tol))
-        out.extend(_points_of(world, fr, b) for b in range(fr.V.shape[0]))
-    return out
+    n_obj = world.object.n
+    env = world.environment
+    tables = _mu_tables(world)
+    chunk = max(1, 2_000_000 // max(1, n_obj * env.m))
+    rows: list[tuple[FloatArray, FloatArray, FloatArray, IntArray]] = []  # per chunk: pts, nrm, mu, pose
+    keys: list[IntArray] = []
+    for k0 in range(0, p.shape[0], chunk):
+        fr = _frame(world, p[k0:k0 + chunk], float(tol))
+        m = fr.masks
+        # kind ranks as ContactKind values sort: edge-edge < edge-vertex < vertex-edge
+        bv, iv, jv = np.nonzero(m.vertex_edge)
+        be, ie, ke = np.nonzero(m.edge_vertex)
+        bb, ib, jb = np.nonzero(m.edge_edge)
+        i2 = (ib + 1) % n_obj
+        P, Q = fr.V[bb, ib], fr.V[bb, i2]
+        uP, uQ = fr.u[bb, ib, jb], fr.u[bb, i2, jb]
+        ends = []
+        for ue in (fr.ee_lo[bb, ib, jb], fr.ee_hi[bb, ib, jb]):
+            ends.append(P + (Q - P) * (ue - uP)[:, None] / (uQ - uP)[:, None])  # as _points_of rounds
+        pts = np.concatenate([fr.V[bv, iv], env.vertices[ke], ends[0], ends[1]])
+        nrm = np.concatenate([env.normals[jv], -fr.Nn[be, ie], env.normals[jb], env.normals[jb]])
+        mu = np.concatenate([tables[0][iv, jv], tables[1][ie, ke], tables[2][ib, jb], tables[2][ib, jb]])
+        pose = np.concatenate([bv, be, bb, bb]) + k0
+        # sort key: (pose, env feature, obj feature, kind rank, end of an edge-edge overlap)
+        envf = np.concatenate([jv, ke, jb, jb])
+        objf = np.concatenate([iv, ie, ib, ib])
+        rank = np.concatenate([np.full(bv.size, 2), np.full(be.size, 1), np.zeros(2 * bb.size, dtype=np.int64)])
+        end = np.concatenate([np.zeros(bv.size + be.size, dtype=np.int64), np.zeros(bb.size, dtype=np.int64),
+                              np.ones(bb.size, dtype=np.int64)])
+        rows.append((pts, nrm, mu, pose))
+        keys.append(np.stack([pose, envf, objf, rank, end]))
+    pts = np.concatenate([r[0] for r in rows]) if rows else np.zeros((0, 2))
+    nrm = np.concatenate([r[1] for r in rows]) if rows else np.zeros((0, 2))
+    mu = np.concatenate([r[2] for r in rows]) if rows else np.zeros(0)
+    key = np.concatenate(keys, axis=1) if keys else np.zeros((5, 0), dtype=np.int64)
+    order = np.lexsort(key[::-1])
+    pose = key[0, order]
+    b = p.shape[0]
+    counts = np.bincount(pose, minlength=b)
+    c = int(counts.max(initial=0))
+    slot = np.arange(order.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    out_p = np.zeros((b, c, 2))
+    out_n = np.zeros((b, c, 2))
+    out_mu = np.zeros((b, c))
+    live = np.zeros((b, c), dtype=bool)
+    out_p[pose, slot], out_n[pose, slot], out_mu[pose, slot], live[pose, slot] = pts[order], nrm[order], mu[order], True
+    return out_p, out_n, out_mu, live
+
+
+def _mu_tables(world: World) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Coefficients of every (object vertex, env edge), (object edge, env vertex) and
+    (object edge, env edge) pair (:meth:`Friction.environment_mu`), cached per world."""
+    hit = _MU_TABLES.get(world)
+    if hit is None:
+        n, m = world.object.n, world.environment.m
+        fric, ve = world.friction, world.environment.vertex_edges
+        hit = (np.array([[fric.environment_mu("v", i, "e", j, n_object=n) for j in range(m)] for i in range(n)]),
+               np.array([[fric.environment_mu("l", i, "ve", k, world_edges=ve, n_object=n) for k in range(m)]
+                         for i in range(n)]),
+               np.array([[fric.environment_mu("l", i, "e", j, n_object=n) for j in range(m)] for i in range(n)]))
+        _MU_TABLES[world] = hit
+    return hit
+
+
+_MU_TABLES: "weakref.WeakKeyDictionary[World, tuple[FloatArray, FloatArray, FloatArray]]" = weakref.WeakKeyDictionary()
 
 
 def _points_of(world: World, fr: _Frame, b: int) -> ContactPoints:

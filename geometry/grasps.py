@@ -1055,15 +1055,7 @@ def _env_contacts(world: World, path: FloatArray, contact_tol: float) -> _EnvCon
     wall): the object stops there, so that contact is STICKING, not penetrating.
     """
     s = path.shape[0]
-    found = contacts.contact_points_batch(world, path, contact_tol)
-    c = max([len(cp) for cp in found] + [0])
-    pts = np.zeros((s, c, 2))
-    nrm = np.zeros((s, c, 2))
-    mu = np.zeros((s, c))
-    live = np.zeros((s, c), dtype=bool)
-    for j, cp in enumerate(found):
-        k = len(cp)
-        pts[j, :k], nrm[j, :k], mu[j, :k], live[j, :k] = cp.points, cp.normals, cp.mu, True
+    pts, nrm, mu, live = contacts.contact_point_arrays(world, path, contact_tol)
     prv = np.minimum(np.arange(s), max(s - 2, 0))
     nxt = np.minimum(prv + 1, s - 1)
     disp, rot = mechanics.pose_displacements(pts, path[prv], path[nxt])

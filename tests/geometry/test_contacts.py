@@ -11,7 +11,7 @@ from geometry.collision import object_env_overlap
 from geometry.contacts import (
     Workspace,
     contact_points,
-    contact_points_batch,
+    contact_point_arrays,
     contact_state,
     enumerate_contact_states,
     principal_contact_masks,
@@ -43,22 +43,24 @@ def make_world(*solids, obj=BLOCK, friction: Friction | None = None) -> World:
     return World(make_object(obj), env, TwoPointGripper(5.0, (80.0, 80.0)), friction or Friction(0.2, 0.2))
 
 
-def test_contact_points_batch_matches_one_pose_at_a_time() -> None:
+def test_contact_point_arrays_match_one_pose_at_a_time() -> None:
     w = make_world(SLOT)
     rng = np.random.default_rng(3)
-    poses = [Pose(0.0, 0.0, math.pi / 2 - 0.0), Pose(225.0, 0.0, math.pi / 2), Pose(80.0, 0.0, 0.2),
-             Pose(115.0, 150.0, 0.0)]
+    # resting and wedged poses (one, two and edge-edge contacts) and random ones
+    poses = [Pose(0.0, 0.0, 0.0), Pose(225.0, 0.0, math.pi / 2), Pose(80.0, 0.0, 0.2), Pose(115.0, 150.0, 0.0),
+             Pose(0.0, 0.0, math.pi / 2 + 0.0), Pose(230.0, 0.0, 0.0), Pose(300.0, 0.0, math.pi / 2)]
     poses += [Pose(float(x), float(y), float(t)) for x, y, t in
-              zip(rng.uniform(-10, 300, 20), rng.uniform(-1, 80, 20), rng.uniform(-3, 3, 20))]
-    batch = contact_points_batch(w, np.array([p.as_array() for p in poses]))
-    assert len(batch) == len(poses)
-    for p, got in zip(poses, batch):
+              zip(rng.uniform(-10, 300, 40), rng.uniform(-1, 80, 40), rng.uniform(-3, 3, 40))]
+    pts, nrm, mu, live = contact_point_arrays(w, np.array([p.as_array() for p in poses]))
+    assert pts.shape[0] == len(poses) and live.any()
+    for b, p in enumerate(poses):
         want = contact_points(w, p)
-        assert got.contacts == want.contacts
-        for a, b in ((got.points, want.points), (got.normals, want.normals), (got.mu, want.mu)):
-            np.testing.assert_allclose(a, b)
-        np.testing.assert_array_equal(got.contact_index, want.contact_index)
-    assert any(len(c) for c in batch)
+        k = len(want)
+        assert live[b].sum() == k and live[b, :k].all()
+        np.testing.assert_array_equal(pts[b, :k], want.points)
+        np.testing.assert_array_equal(nrm[b, :k], want.normals)
+        np.testing.assert_array_equal(mu[b, :k], want.mu)
+    assert max(len(contact_points(w, p)) for p in poses) >= 2
 
 
 def names(world: World, pose: Pose) -> list[str]:
