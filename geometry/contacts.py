@@ -134,9 +134,17 @@ def _rotate(theta: FloatArray, pts: FloatArray) -> FloatArray:
     return np.stack([c * pts[None, :, 0] - s * pts[None, :, 1], s * pts[None, :, 0] + c * pts[None, :, 1]], axis=-1)
 
 
+def _dot2(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``einsum("bnk,mk->bnm", a, b)`` for 2-vectors, as two products and a sum."""
+    return a[:, :, None, 0] * b[None, None, :, 0] + a[:, :, None, 1] * b[None, None, :, 1]
+
+
 def _frame(world: World, poses: FloatArray, tol: float) -> _Frame:
     poly = world.object.polygon
     env = world.environment
+    n = poly.vertices.shape[0]
+    prev = (np.arange(n) - 1) % n  # index shifts instead of np.roll
+    nxt = (np.arange(n) + 1) % n
     theta = poses[:, 2]
     V = _rotate(theta, poly.vertices) + poses[:, None, :2]
     D = _rotate(theta, poly.edge_directions)
@@ -153,9 +161,9 @@ def _frame(world: World, poses: FloatArray, tol: float) -> _Frame:
     s = rx * Ne[:, 0] + ry * Ne[:, 1]
     uc = np.clip(u, 0.0, Le)
     near_ve = (u - uc) ** 2 + s**2 <= tol2
-    nd_next = np.einsum("bnk,mk->bnm", D, Ne)  # d_i . n_j, d_i leaving v_i along l_i
-    nd_prev = -np.roll(nd_next, 1, axis=1)  # -d_(i-1) . n_j, leaving v_i along l_(i-1)
-    side_ve = (nd_next >= -tol / Lo[None, :, None]) & (nd_prev >= -tol / np.roll(Lo, 1)[None, :, None])
+    nd_next = _dot2(D, Ne)  # d_i . n_j, d_i leaving v_i along l_i
+    nd_prev = -nd_next[:, prev]  # -d_(i-1) . n_j, leaving v_i along l_(i-1)
+    side_ve = (nd_next >= -tol / Lo[None, :, None]) & (nd_prev >= -tol / Lo[prev][None, :, None])
     ve = near_ve & side_ve & poly.convex_vertices[None, :, None]
 
     # ---- edge-vertex: environment vertex k vs object edge i -------------------------
@@ -166,15 +174,15 @@ def _frame(world: World, poses: FloatArray, tol: float) -> _Frame:
     euc = np.clip(eu, 0.0, Lo[None, :, None])
     near_ev = (eu - euc) ** 2 + es**2 <= tol2
     arrive = env.vertex_edges[:, 0]
-    nt_next = np.einsum("bnk,mk->bnm", Nn, T)  # n_i . t_k (edge leaving ve_k)
-    nt_prev = -np.einsum("bnk,mk->bnm", Nn, T[arrive])  # n_i . (-t of the arriving edge)
+    nt_next = _dot2(Nn, T)  # n_i . t_k (edge leaving ve_k)
+    nt_prev = -_dot2(Nn, T[arrive])  # n_i . (-t of the arriving edge)
     side_ev = (nt_next >= -tol / Le[None, None, :]) & (nt_prev >= -tol / Le[arrive][None, None, :])
     ev = near_ev & side_ev & env.vertex_convex[None, None, :]
 
     # ---- edge-edge: object edge i (v_i -> v_i+1) vs environment edge j --------------
     uP, sP = u, s
-    uQ, sQ = np.roll(u, -1, axis=1), np.roll(s, -1, axis=1)
-    facing = np.einsum("bnk,mk->bnm", Nn, Ne) < 0.0
+    uQ, sQ = u[:, nxt], s[:, nxt]
+    facing = _dot2(Nn, Ne) < 0.0
     lo = np.maximum(np.minimum(uP, uQ), 0.0)
     hi = np.minimum(np.maximum(uP, uQ), Le)
     denom = uQ - uP
@@ -185,7 +193,7 @@ def _frame(world: World, poses: FloatArray, tol: float) -> _Frame:
     ee = ok & (np.abs(s_lo) <= tol) & (np.abs(s_hi) <= tol)
 
     # ---- subsumption: an edge-edge contact absorbs the contacts at its overlap ends --
-    ve = ve & ~ee & ~np.roll(ee, 1, axis=1)  # v_i is the start of l_i and the end of l_(i-1)
+    ve = ve & ~ee & ~ee[:, prev]  # v_i is the start of l_i and the end of l_(i-1)
     ev = ev & ~ee & ~ee[:, :, arrive]  # ve_k is the start of e_k and the end of e_arrive(k)
     return _Frame(V, D, Nn, u, s, ContactMasks(ve, ev, ee), lo, hi)
 
