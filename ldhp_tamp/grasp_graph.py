@@ -129,7 +129,7 @@ class GraspGraphOptions:
     motion: MotionCheckOptions = MotionCheckOptions()
     max_intra_depth: int = 3
     slack: float = 1.0
-    batch: int = 2048
+    batch: int = 512
     max_edge_checks: int = 30_000
     start_touch_tol: float = CONTACT_TOL
     cache_poses: int = 16
