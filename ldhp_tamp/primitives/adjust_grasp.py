@@ -1411,18 +1411,36 @@ class Slide(_AdjustGrasp):
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
-        gs = ctx.grasps
+        is_src = np.zeros(len(ctx.grasps), dtype=bool)
+        is_src[src] = True
         out = []
         for k in range(2):
-            s = src[gs.touching[src, k]]
+            a, b, travel = self._pairs(ctx, k)
+            keep = is_src[a] & members[b]
+            out.append((a[keep], b[keep], np.full(int(keep.sum()), k), travel[keep]))
+        a, b, f, travel = (np.concatenate(x) for x in zip(*out))
+        return a, b, np.zeros(a.size, np.int64), f, travel
+
+    @staticmethod
+    def _pairs(ctx: AdjustContext, k: int) -> tuple[IntArray, IntArray, FloatArray]:
+        """Every slide of finger k in the grasp set, whatever the pose: (source, target,
+        travel) for sources touching with finger k (and not finger 0 when k = 1, a
+        two-finger slide being finger 0's), targets in the source's slide group, travel
+        within ``slide_max_travel``; sources ascending, each source's targets in group
+        order (what :func:`_group_pairs` gives for any sorted subset of the sources).
+        Computed once per grasp set; a layer keeps the pairs of its sources and G_T."""
+        key = ("slide-pairs", k)
+        hit = ctx._cache.get(key)
+        if hit is None:
+            gs = ctx.grasps
+            s = np.flatnonzero(gs.touching[:, k])
             if k == 1:
                 s = s[~gs.touching[s, 0]]
             a, b = _group_pairs(ctx.slide_groups[k], s)
             travel = np.linalg.norm(gs.gripper[b, :2] - gs.gripper[a, :2], axis=1)
-            keep = members[b] & (a != b) & (travel <= ctx.options.slide_max_travel)
-            out.append((a[keep], b[keep], np.full(int(keep.sum()), k), travel[keep]))
-        a, b, f, travel = (np.concatenate(x) for x in zip(*out))
-        return a, b, np.zeros(a.size, np.int64), f, travel
+            keep = (a != b) & (travel <= ctx.options.slide_max_travel)
+            hit = ctx._cache[key] = (a[keep], b[keep], travel[keep])
+        return hit
 
     def motion(self, context: AdjustContext, pose: Pose, edges: IntraEdges) -> GripperMotion:
         gs = context.grasps

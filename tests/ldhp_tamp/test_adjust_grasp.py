@@ -313,3 +313,34 @@ def test_holds_among_some_grasps_decides_them_as_for_all() -> None:
     more = some | (rng.random(len(gs)) < 0.3)  # partly cached now
     assert np.array_equal(ctx.holds(pose, more), everything & more)
     assert np.array_equal(ctx.holds(pose), everything)
+
+
+def test_slide_candidates_from_the_precomputed_pairs_are_the_per_layer_ones() -> None:
+    """Slide's pairs are computed once per grasp set; a layer's candidates must be what
+    pairing its own sources within their slide groups gives, in the same order."""
+    from pathlib import Path
+
+    from ldhp_tamp.primitives.adjust_grasp import AdjustContext, Slide, _group_pairs
+    from ldhp_tamp.scenario import load_scenario
+
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task2_slot_insertion.toml")
+    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=20))
+    ctx = AdjustContext(sc.world, gs)
+    rng = np.random.default_rng(4)
+    for trial in range(4):
+        members = rng.random(len(gs)) < 0.6
+        src = np.flatnonzero(members & (rng.random(len(gs)) < 0.8))
+        got = Slide()._candidates(ctx, sc.start, src, members)
+        want = []
+        for k in range(2):  # the per-layer computation
+            s = src[gs.touching[src, k]]
+            if k == 1:
+                s = s[~gs.touching[s, 0]]
+            a, b = _group_pairs(ctx.slide_groups[k], s)
+            travel = np.linalg.norm(gs.gripper[b, :2] - gs.gripper[a, :2], axis=1)
+            keep = members[b] & (a != b) & (travel <= ctx.options.slide_max_travel)
+            want.append((a[keep], b[keep], np.full(int(keep.sum()), k), travel[keep]))
+        a, b, f, travel = (np.concatenate(x) for x in zip(*want))
+        assert a.size > 100
+        for x, y in zip(got, (a, b, np.zeros(a.size, np.int64), f, travel)):
+            np.testing.assert_array_equal(x, y)
