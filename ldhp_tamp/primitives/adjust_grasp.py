@@ -1352,23 +1352,13 @@ class Pivot(_AdjustGrasp):
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
-        gs = ctx.grasps
-        tol = 5.0 * ctx.options.match_tol
+        is_src = np.zeros(len(ctx.grasps), dtype=bool)
+        is_src[src] = True
         out = []
         for k in range(2):
-            a, b = _group_pairs(ctx.pivot_groups[k], src[gs.touching[src, k]])
-            delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
-            keep = members[b] & (a != b) & (np.abs(delta) > 1e-6)
-            fk = np.full(a.size, k)
-            centre = np.nan_to_num(_pivot_centre(ctx, a, fk))
-            if ctx.is_polyline and a.size:
-                c, s = np.cos(delta), np.sin(delta)
-                r = ctx.anchors[a, k] - centre
-                moved = centre + np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
-                keep &= np.linalg.norm(np.nan_to_num(moved - ctx.anchors[b, k], nan=np.inf), axis=1) <= tol
-            a, b, delta, centre = a[keep], b[keep], delta[keep], centre[keep]
-            rad = 0.5 * (np.linalg.norm(ctx.anchors[a, 0] - centre, axis=1)
-                         + np.linalg.norm(ctx.anchors[a, 1] - centre, axis=1))
+            a, b, delta, rad = self._pairs(ctx, k)
+            keep = is_src[a] & members[b]
+            a, b, delta, rad = a[keep], b[keep], delta[keep], rad[keep]
             for sense in (1, -1):
                 ang = np.where(delta * sense > 0, delta, delta + sense * 2.0 * np.pi)
                 out.append((a, b, np.full(a.size, sense), np.full(a.size, k), np.abs(ang) * rad))
@@ -1377,6 +1367,33 @@ class Pivot(_AdjustGrasp):
             return z, z, z, z, np.zeros(0)
         a, b, sense, f, travel = (np.concatenate(x) for x in zip(*out))
         return a, b, sense, f, travel
+
+    @staticmethod
+    def _pairs(ctx: AdjustContext, k: int) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
+        """Every pivot about finger k in the grasp set, whatever the pose: (source,
+        target, turn angle, mean anchor radius) for sources touching with finger k and
+        targets sharing its pivot point and width (a polyline target must be the source
+        turned about it); sources ascending, targets in group order. Computed once per
+        grasp set; a layer keeps the pairs of its sources and G_T."""
+        key = ("pivot-pairs", k)
+        hit = ctx._cache.get(key)
+        if hit is None:
+            gs = ctx.grasps
+            tol = 5.0 * ctx.options.match_tol
+            a, b = _group_pairs(ctx.pivot_groups[k], np.flatnonzero(gs.touching[:, k]))
+            delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
+            keep = (a != b) & (np.abs(delta) > 1e-6)
+            centre = np.nan_to_num(_pivot_centre(ctx, a, np.full(a.size, k)))
+            if ctx.is_polyline and a.size:
+                c, s = np.cos(delta), np.sin(delta)
+                r = ctx.anchors[a, k] - centre
+                moved = centre + np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
+                keep &= np.linalg.norm(np.nan_to_num(moved - ctx.anchors[b, k], nan=np.inf), axis=1) <= tol
+            a, b, delta, centre = a[keep], b[keep], delta[keep], centre[keep]
+            rad = 0.5 * (np.linalg.norm(ctx.anchors[a, 0] - centre, axis=1)
+                         + np.linalg.norm(ctx.anchors[a, 1] - centre, axis=1))
+            hit = ctx._cache[key] = (a, b, delta, rad)
+        return hit
 
     def motion(self, context: AdjustContext, pose: Pose, edges: IntraEdges) -> GripperMotion:
         gs = context.grasps

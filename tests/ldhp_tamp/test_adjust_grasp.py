@@ -344,3 +344,40 @@ def test_slide_candidates_from_the_precomputed_pairs_are_the_per_layer_ones() ->
         assert a.size > 100
         for x, y in zip(got, (a, b, np.zeros(a.size, np.int64), f, travel)):
             np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("scenario", ["task1_zero_mobility_lift", "task2_slot_insertion"])
+def test_pivot_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(scenario: str) -> None:
+    from pathlib import Path
+
+    from geometry.poses import wrap_angle
+    from ldhp_tamp.primitives.adjust_grasp import AdjustContext, Pivot, _group_pairs, _pivot_centre
+    from ldhp_tamp.scenario import load_scenario
+
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / f"{scenario}.toml")
+    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=20))
+    ctx = AdjustContext(sc.world, gs)
+    rng = np.random.default_rng(5)
+    members = rng.random(len(gs)) < 0.6
+    src = np.flatnonzero(members & (rng.random(len(gs)) < 0.8))
+    got = Pivot()._candidates(ctx, sc.start, src, members)
+    want = []  # the per-layer computation
+    for k in range(2):
+        a, b = _group_pairs(ctx.pivot_groups[k], src[gs.touching[src, k]])
+        delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
+        keep = members[b] & (a != b) & (np.abs(delta) > 1e-6)
+        centre = np.nan_to_num(_pivot_centre(ctx, a, np.full(a.size, k)))
+        if ctx.is_polyline and a.size:
+            c, s = np.cos(delta), np.sin(delta)
+            r = ctx.anchors[a, k] - centre
+            moved = centre + np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
+            keep &= np.linalg.norm(np.nan_to_num(moved - ctx.anchors[b, k], nan=np.inf), axis=1) <= 5.0 * ctx.options.match_tol
+        a, b, delta, centre = a[keep], b[keep], delta[keep], centre[keep]
+        rad = 0.5 * (np.linalg.norm(ctx.anchors[a, 0] - centre, axis=1) + np.linalg.norm(ctx.anchors[a, 1] - centre, axis=1))
+        for sense in (1, -1):
+            ang = np.where(delta * sense > 0, delta, delta + sense * 2.0 * np.pi)
+            want.append((a, b, np.full(a.size, sense), np.full(a.size, k), np.abs(ang) * rad))
+    want = [np.concatenate(x) for x in zip(*want)]
+    assert want[0].size > 20
+    for x, y in zip(got, want):
+        np.testing.assert_array_equal(x, y)
