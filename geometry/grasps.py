@@ -983,8 +983,8 @@ class MotionCheckOptions:
     w1: float = 1.0
     w2: float = 1.0
     angle_iterations: int = 8
-    chunk: int = 8
-    chunk_growth: int = 2
+    chunk: int = 2
+    chunk_growth: int = 4
     alpha_samples: int = 4
 
     def __post_init__(self) -> None:
