@@ -494,7 +494,9 @@ class GraspPlanner:
                 hit = self._motion_sets[key] = (rate_motion_grasps(self.world, self.grasps, segment.poses, hit[0],
                                                                    self.options.motion), hit[1])
             return hit[0], hit[1], False
-        cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]))
+        # G_T arrays are sorted and unique (pose_conditioned), and so are G_m's lists
+        cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]),
+                              assume_unique=True)
         n_cand = cand.size
         verified, recheck = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
         parent, span = segment.parent, segment.span
@@ -503,11 +505,11 @@ class GraspPlanner:
         if known is not None and parent is not None and span is not None:
             lo, hi = span
             last = parent.poses.shape[0] - 1
-            verified = np.intersect1d(known.indices, cand)
+            verified = np.intersect1d(known.indices, cand, assume_unique=True)
             if hi < last:  # a first half: its last sample's modes differ from the parent's
                 recheck = np.array([hi - lo])
             inside = (known.rejected_at >= lo) & (known.rejected_at <= hi) & ~((known.rejected_at == hi) & (hi < last))
-            cand = np.setdiff1d(cand, known.rejected[inside])
+            cand = np.setdiff1d(cand, known.rejected[inside], assume_unique=True)
         # The candidates are G_T at both ends: collision-free there if G_T's tolerance is
         # at most G_m's (a smaller tolerance is the stricter rule).
         ends = (0, segment.poses.shape[0] - 1) if self.options.adjust.tol <= self.options.motion.tol else ()

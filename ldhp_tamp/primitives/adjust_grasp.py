@@ -1117,7 +1117,11 @@ class LazyAdjustGrasp(Protocol):
 
 
 def _as_rows(x: ArrayLike) -> IntArray:
-    return np.unique(np.asarray(x, dtype=np.int64).reshape(-1))
+    """Sorted unique grasp indices (``np.unique``, skipped when they already are)."""
+    a = np.asarray(x, dtype=np.int64).reshape(-1)
+    if a.size < 2 or bool((a[1:] > a[:-1]).all()):
+        return a
+    return np.unique(a)
 
 
 def _ints(x: ArrayLike) -> IntArray:
