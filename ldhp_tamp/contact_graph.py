@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -102,6 +103,9 @@ class PlanningContext:
     """The enumerated grasp set, for admissibility that needs some grasp to exist (an
     air-move lift or placement needs a grasp that carries the object); ``None``: such
     transitions are admitted without that test."""
+    memo: dict[Any, Any] = field(default_factory=dict, repr=False)
+    """Results the streams may compute again for the same input within one solve (a
+    stream's sweeps: the top-tier iterations share their first steps), keyed by it."""
 
     @property
     def start_free(self) -> bool:

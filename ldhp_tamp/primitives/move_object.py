@@ -111,7 +111,10 @@ class _Swept:
                start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment]:
         scored: list[tuple[float, int, Segment]] = []
         for motion, s_max, params in self.families(ctx, start_pose):
-            sw = sweep(ctx.world, motion, s_max)
+            key = ("sweep", motion, s_max)  # a pure function of them: iterations share steps
+            sw = ctx.memo.get(key)
+            if sw is None:
+                sw = ctx.memo[key] = sweep(ctx.world, motion, s_max)
             for s_end in _end_values(ctx, sw, from_state, to_state):
                 seg = self._segment(ctx, motion, s_end, from_state, to_state, params)
                 score = float(ctx.goal_distance(seg.poses[-1:])[0])
