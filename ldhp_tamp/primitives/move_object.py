@@ -90,20 +90,21 @@ class _Swept:
     def transitions(self, ctx: PlanningContext) -> set[tuple[ContactState, ContactState]]:
         # One sweep per (witness pose, motion family), independent of each other: on the
         # machine's cores (ldhp_tamp.parallel; the same pairs on any number of them).
-        poses = [pose for state in ctx.states if not state.is_free for pose in ctx.witness_poses(state)]
         where = f"the setup ({self.name} transitions)"
-
-        def pairs_from(pose: Pose) -> set[tuple[ContactState, ContactState]]:
+        motions = []
+        for state in ctx.states:
             budget.check(ctx.deadline, where)
-            out: set[tuple[ContactState, ContactState]] = set()
-            for motion, s_max, _ in self.families(ctx, pose):
-                sw = sweep(ctx.world, motion, s_max, step_mm=TRANSITION_STEP_MM, refine_bits=10)
-                out |= _consecutive_pairs(sw)
-            return out
+            if not state.is_free:
+                motions += [(motion, s_max) for pose in ctx.witness_poses(state)
+                            for motion, s_max, _ in self.families(ctx, pose)]
 
-        budget.check(ctx.deadline, where)
+        def pairs_from(job: tuple[Motion, float]) -> set[tuple[ContactState, ContactState]]:
+            budget.check(ctx.deadline, where)
+            sw = sweep(ctx.world, job[0], job[1], step_mm=TRANSITION_STEP_MM, refine_bits=10)
+            return _consecutive_pairs(sw)
+
         pairs: set[tuple[ContactState, ContactState]] = set()
-        for found in fork_map(pairs_from, poses):
+        for found in fork_map(pairs_from, motions):
             pairs |= found
         return pairs
 
