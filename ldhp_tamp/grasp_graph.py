@@ -35,12 +35,14 @@ the details and measurements.
 from __future__ import annotations
 
 import enum
+import functools
 import logging
 import math
 import time
 from collections import Counter, OrderedDict, defaultdict
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from functools import cached_property
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 import shapely
@@ -346,7 +348,13 @@ class _Layer:
     members: BoolArray  # (G,) G_T (and the start node at layer 0)
     size: int
     state: str  # contact-state name at T_k
-    intra: BoolArray  # (G,) members that hold the object still: the only intra-pose ends
+    holding: Callable[[], BoolArray] = field(repr=False)  # computes ``intra``
+
+    @cached_property
+    def intra(self) -> BoolArray:
+        """(G,) members that hold the object still: the only intra-pose ends (decided
+        when first asked: a layer the forward pass never reaches does not pay for it)."""
+        return self.holding()
 
 
 @dataclass(frozen=True, eq=False)
@@ -563,7 +571,8 @@ class GraspPlanner:
             members[self.pose_grasps(p)] = True
             if k == 0:
                 members[self._start_index] = True
-            layers.append(_Layer(k, p, p.tobytes(), members, int(members.sum()), states[k], ctx.holds(p, members)))
+            layers.append(_Layer(k, p, p.tobytes(), members, int(members.sum()), states[k],
+                                 functools.partial(ctx.holds, p, members)))
         timings["pose_sets"] = time.perf_counter() - t0
 
         # G_m per segment, in order; stop at the first empty one.
