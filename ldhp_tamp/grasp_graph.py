@@ -64,6 +64,7 @@ from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS
 from geometry.world import GripperState, PolylineGripper, World
 from ldhp_tamp import budget
+from ldhp_tamp.parallel import Helper, cores
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import Step, Waypoint
 from ldhp_tamp.primitives.adjust_grasp import (
@@ -125,6 +126,10 @@ class GraspGraphOptions:
     cache_poses : int
         Poses whose candidate intra-pose edges (and what was learnt of them) are kept
         between solves, least recently used dropped first (each costs ~1-30 MB).
+    helper : bool
+        On a machine with more than one core, compute the G_m of two segments at once,
+        one in a helper process forked with the grasp set (:class:`ldhp_tamp.parallel.Helper`);
+        the same sets either way. :meth:`GraspPlanner.close` ends it.
     """
 
     adjust: AdjustGraspOptions = AdjustGraspOptions()
@@ -135,6 +140,7 @@ class GraspGraphOptions:
     max_edge_checks: int = 30_000
     start_touch_tol: float = CONTACT_TOL
     cache_poses: int = 16
+    helper: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -426,6 +432,7 @@ class GraspPlanner:
         self._cands: OrderedDict[tuple[bytes, str, bool], _Cands] = OrderedDict()
         # a layer's candidate edges, all primitives together (keyed by the _Cands objects)
         self._layer_graphs: OrderedDict[tuple[_Cands, ...], _LayerGraph] = OrderedDict()
+        self._helper: Helper | None = None
 
     # ---- sets ------------------------------------------------------------------------
 
@@ -472,6 +479,7 @@ class GraspPlanner:
         self._motion_sets.clear()
         self._cands.clear()
         self._layer_graphs.clear()
+        self.close()  # a helper holds the previous grasp set
 
     def pose_grasps(self, pose: FloatArray) -> IntArray:
         """G_T at an object pose (cached by the pose's bytes)."""
@@ -481,6 +489,36 @@ class GraspPlanner:
             hit = pose_conditioned(self.world, self.grasps, pose, self.options.adjust.tol)
             self._pose_sets[key] = hit
         return hit
+
+    def close(self) -> None:
+        """End the helper process, if any (a later :meth:`plan` starts another)."""
+        if self._helper is not None:
+            self._helper.close()
+            self._helper = None
+
+    def _helper_process(self) -> Helper | None:
+        if not self.options.helper or cores() < 2:
+            return None
+        if self._helper is None or not self._helper.alive:
+            try:
+                self._helper = Helper((self.world, self.grasps, self.options.motion))
+            except (OSError, RuntimeError) as exc:  # no fork: one core it is
+                log.debug("no helper process: %s", exc)
+                self._helper = None
+        return self._helper
+
+    def _pose_sets_paired(self, poses: Sequence[FloatArray]) -> None:
+        """G_T of the poses not cached yet, two at a time with the helper process."""
+        helper = self._helper_process()
+        todo = list({p.tobytes(): p for p in poses if p.tobytes() not in self._pose_sets}.values())
+        if helper is None or len(todo) < 2:
+            return
+        for j in range(0, len(todo) - 1, 2):
+            helper.submit(_helper_pose, todo[j + 1], self.options.adjust.tol)
+            try:
+                self.pose_grasps(todo[j])
+            finally:
+                self._pose_sets[todo[j + 1].tobytes()] = helper.result()
 
     def motion_grasps(self, segment: Segment, rate: bool = True) -> tuple[MotionGrasps, int, bool]:
         """G_m of a segment (cached by its primitive and dense poses): the value, the
@@ -502,6 +540,16 @@ class GraspPlanner:
                 hit = self._motion_sets[key] = (rate_motion_grasps(self.world, self.grasps, segment.poses, hit[0],
                                                                    self.options.motion), hit[1])
             return hit[0], hit[1], False
+        cand, n_cand, verified, recheck, ends = self._motion_inputs(segment)
+        mg = motion_conditioned(self.world, self.grasps, segment.poses, cand, self.options.motion,
+                                verified=verified, recheck=recheck, rate=rate, free_at=ends)
+        self._motion_sets[key] = (mg, n_cand)
+        return mg, n_cand, True
+
+    def _motion_inputs(self, segment: Segment) -> tuple[IntArray, int, IntArray, IntArray, tuple[int, ...]]:
+        """What :func:`motion_conditioned` is given for ``segment``: the candidates
+        left to check, how many G_T gives, the grasps verified on the parent, the samples
+        to check those at, the samples known collision-free."""
         # G_T arrays are sorted and unique (pose_conditioned), and so are G_m's lists
         cand = np.intersect1d(self.pose_grasps(segment.poses[0]), self.pose_grasps(segment.poses[-1]),
                               assume_unique=True)
@@ -521,10 +569,23 @@ class GraspPlanner:
         # The candidates are G_T at both ends: collision-free there if G_T's tolerance is
         # at most G_m's (a smaller tolerance is the stricter rule).
         ends = (0, segment.poses.shape[0] - 1) if self.options.adjust.tol <= self.options.motion.tol else ()
-        mg = motion_conditioned(self.world, self.grasps, segment.poses, cand, self.options.motion,
-                                verified=verified, recheck=recheck, rate=rate, free_at=ends)
-        self._motion_sets[key] = (mg, n_cand)
-        return mg, n_cand, True
+        return cand, n_cand, verified, recheck, ends
+
+    def _motion_ahead(self, segments: Sequence[Segment], k: int) -> tuple[Segment, int] | None:
+        """Send the G_m of the first segment after ``k`` that is not cached (and not a
+        half of an uncached segment) to the helper; returns it with its candidate count."""
+        helper = self._helper_process()
+        if helper is None:
+            return None
+        for seg in segments[k + 1:]:
+            if _motion_key(seg) in self._motion_sets:
+                continue
+            if seg.parent is not None and _motion_key(seg.parent) not in self._motion_sets:
+                return None  # its inputs depend on a G_m not computed yet
+            cand, n_cand, verified, recheck, ends = self._motion_inputs(seg)
+            helper.submit(_helper_motion, np.asarray(seg.poses), cand, verified, recheck, ends)
+            return seg, n_cand
+        return None
 
     # ---- the solve ---------------------------------------------------------------------
 
@@ -565,6 +626,7 @@ class GraspPlanner:
         t0 = time.perf_counter()
         poses = [np.asarray(s.poses[0], dtype=float) for s in segments] + [np.asarray(segments[-1].poses[-1], dtype=float)]
         states = [s.from_state.name for s in segments] + [segments[-1].to_state.name]
+        self._pose_sets_paired(poses)
         layers = []
         for k, p in enumerate(poses):
             members = np.zeros(size, dtype=bool)
@@ -582,7 +644,15 @@ class GraspPlanner:
         motion_sizes = []
         for k, seg in enumerate(segments):
             budget.check(deadline, "the bottom tier, computing the grasp sets G_m")
-            mg, n_cand, fresh = self.motion_grasps(seg, rate=False)
+            ahead = None if _motion_key(seg) in self._motion_sets else self._motion_ahead(segments, k)
+            try:
+                mg, n_cand, fresh = self.motion_grasps(seg, rate=False)
+            finally:
+                if ahead is not None:  # the helper's G_m, computed meanwhile
+                    assert self._helper is not None
+                    other = self._helper.result()
+                    self._motion_sets[_motion_key(ahead[0])] = (other, ahead[1])
+                    checks += other.checks
             if fresh:
                 checks += mg.checks
             motion_sizes.append(len(mg))
@@ -1074,6 +1144,20 @@ def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[F
                 picked[key].add(int(ix[j]))
                 count += 1
     return {key: np.array(sorted(v), dtype=np.int64) for key, v in picked.items() if v}
+
+
+def _helper_pose(state: tuple[World, GraspSet, MotionCheckOptions], pose: FloatArray, tol: float) -> IntArray:
+    """A G_T computed in the helper process (see :meth:`GraspPlanner._pose_sets_paired`)."""
+    world, grasps, _ = state
+    return pose_conditioned(world, grasps, pose, tol)
+
+
+def _helper_motion(state: tuple[World, GraspSet, MotionCheckOptions], poses: FloatArray, cand: IntArray,
+                   verified: IntArray, recheck: IntArray, ends: tuple[int, ...]) -> MotionGrasps:
+    """A G_m computed in the helper process (see :meth:`GraspPlanner._motion_ahead`)."""
+    world, grasps, options = state
+    return motion_conditioned(world, grasps, poses, cand, options, verified=verified, recheck=recheck, rate=False,
+                              free_at=ends)
 
 
 def _motion_key(seg: Segment) -> tuple[str, bytes]:

@@ -27,7 +27,7 @@ from typing import Callable, Sequence, TypeVar
 
 from ldhp_tamp.errors import TimeBudgetExceeded
 
-__all__ = ["cores", "fork_map"]
+__all__ = ["Helper", "cores", "fork_map"]
 
 log = logging.getLogger(__name__)
 
@@ -137,3 +137,104 @@ def _collect(pid: int, read_end: int, expected: int) -> list[R]:
     if len(payload) != expected:
         raise RuntimeError(f"a worker process of the solve returned {len(payload)} results, not {expected}")
     return payload
+
+
+class Helper:
+    """One forked child that runs calls for its parent, one at a time, on the other core.
+
+    The child is forked when the helper is made and inherits ``state`` (for the bottom
+    tier: the world and the grasp set), which is never pickled: a call sends only its
+    function (a module-level one, pickled by name) and its small arguments, and the
+    child runs ``fn(state, *args)``. :meth:`submit` sends a call and returns at once;
+    :meth:`result` waits for its answer (its exception raised again here). After a
+    result interrupted by an exception (the budget's alarm), the helper is closed: its
+    pipe may still hold the answer. :meth:`close` ends the child (it also ends when the
+    parent's end of the pipe closes, the parent exiting included).
+    """
+
+    def __init__(self, state: object) -> None:
+        from multiprocessing.connection import Pipe
+
+        if not hasattr(os, "fork"):
+            raise RuntimeError("no os.fork on this platform")
+        mine, theirs = Pipe(duplex=True)
+        pid = os.fork()
+        if pid == 0:  # the child: never returns
+            try:
+                mine.close()
+                _serve(theirs, state)
+            finally:
+                os._exit(0)
+        theirs.close()
+        self._conn = mine
+        self._pid = pid
+        self._pending = False
+
+    @property
+    def alive(self) -> bool:
+        return self._pid > 0
+
+    def submit(self, fn: Callable[..., R], *args: object) -> None:
+        """Send ``fn(state, *args)`` to the child (one call at a time)."""
+        if not self.alive or self._pending:
+            raise RuntimeError("helper: closed, or a call is still pending")
+        self._conn.send((fn, args))
+        self._pending = True
+
+    def result(self) -> R:  # type: ignore[type-var]
+        """The pending call's value (its exception raised again here)."""
+        if not self._pending:
+            raise RuntimeError("helper: no call pending")
+        try:
+            kind, payload = self._conn.recv()
+        except BaseException:
+            self.close()  # interrupted (or the child died): its answer may still come
+            raise
+        self._pending = False
+        if kind == "timeout":
+            raise TimeBudgetExceeded(payload)
+        if kind == "error":
+            raise payload
+        if kind == "failed":
+            raise RuntimeError(f"the solve's helper process failed: {payload}")
+        return payload
+
+    def close(self) -> None:
+        """End the child and reap it (idempotent)."""
+        if not self.alive:
+            return
+        pid, self._pid = self._pid, -1
+        with contextlib.suppress(OSError):
+            self._conn.close()
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        with contextlib.suppress(ChildProcessError):
+            os.waitpid(pid, 0)
+
+    def __del__(self) -> None:  # a helper nobody closed still ends its child
+        with contextlib.suppress(Exception):
+            self.close()
+
+
+def _serve(conn: object, state: object) -> None:
+    """The helper child's loop: run each call received, send back its value or error."""
+    signal.signal(signal.SIGALRM, signal.SIG_DFL)
+    while True:
+        try:
+            fn, args = conn.recv()  # type: ignore[attr-defined]
+        except (EOFError, OSError):
+            return
+        try:
+            message: tuple[str, object] = ("ok", fn(state, *args))
+        except TimeBudgetExceeded as exc:
+            message = ("timeout", exc.where)
+        except BaseException as exc:
+            try:
+                pickle.dumps(exc)
+                message = ("error", exc)
+            except Exception:
+                message = ("failed", f"{type(exc).__name__}: {exc}")
+        try:
+            conn.send(message)  # type: ignore[attr-defined]
+        except Exception as exc:
+            conn.send(("failed", f"its result cannot be pickled: {type(exc).__name__}: {exc}"))  # type: ignore[attr-defined]

@@ -320,3 +320,31 @@ def test_a_bisected_segments_halves_get_the_grasp_sets_checking_them_from_scratc
         assert np.array_equal(derived.indices, scratch.indices)
         np.testing.assert_allclose(derived.quality, scratch.quality)
         assert derived.checks < scratch.checks  # what the parent settled was not checked again
+
+
+def test_the_helper_process_changes_no_grasp_plan_and_ends_with_close():
+    """G_m of two segments at once (one in a helper process) gives what one process
+    gives, on a path whose refinement halves depend on their parents' G_m."""
+    import dataclasses
+    import os
+
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=20))
+    pivot = world.object_vertices(sc.start)[1]
+    tip = segment(world, "tip", rotate_about(sc.start, pivot, -1), math.radians(40.0))
+    a, b = tip.split()
+    paths = [PosePath((tip, lift(world, tip.end, 50.0))), PosePath((*a.split(), *b.split(), lift(world, tip.end, 50.0)))]
+    out = {}
+    for on in (False, True):
+        opts = dataclasses.replace(GraspGraphOptions(), helper=on)
+        planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release, opts)
+        try:
+            out[on] = [(r.status, r.failing_segment, r.cost, r.nodes, r.layer_sizes, r.motion_sizes)
+                       for r in (planner.plan(p) for p in paths)]
+            if on and hasattr(os, "fork") and os.cpu_count() and os.cpu_count() > 1:
+                assert planner._helper is not None and planner._helper.alive
+        finally:
+            planner.close()
+        assert planner._helper is None
+    assert out[True] == out[False]

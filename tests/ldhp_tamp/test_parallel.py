@@ -95,3 +95,49 @@ def test_unpicklable_errors_and_results_are_reported() -> None:
     with pytest.raises(RuntimeError, match="cannot be pickled"):
         fork_map(lambda x: (lambda: x), range(64), 2)  # a child's lambdas
     assert _children() <= before
+
+
+def _add(state, x):
+    return state["base"] + x
+
+
+def _boom(state, message):
+    raise ValueError(message)
+
+
+def _late(state, where):
+    raise TimeBudgetExceeded(where)
+
+
+def _pid(state):
+    return os.getpid()
+
+
+@needs_fork
+def test_a_helper_runs_calls_with_the_state_it_was_forked_with() -> None:
+    from ldhp_tamp.parallel import Helper
+
+    before = _children()
+    h = Helper({"base": 40})
+    try:
+        h.submit(_add, 2)
+        assert h.result() == 42
+        h.submit(_pid)
+        assert h.result() != os.getpid()
+        h.submit(_boom, "no")
+        with pytest.raises(ValueError, match="no"):
+            h.result()
+        h.submit(_late, "the bottom tier")  # still usable after an error it reported
+        with pytest.raises(TimeBudgetExceeded) as info:
+            h.result()
+        assert info.value.where == "the bottom tier"
+        h.submit(_add, 0)
+        with pytest.raises(RuntimeError):
+            h.submit(_add, 1)  # one call at a time
+        assert h.result() == 40
+    finally:
+        h.close()
+    h.close()  # idempotent
+    assert not h.alive and _children() <= before
+    with pytest.raises(RuntimeError):
+        h.submit(_add, 1)
