@@ -106,6 +106,9 @@ class PlanningContext:
     memo: dict[Any, Any] = field(default_factory=dict, repr=False)
     """Results the streams may compute again for the same input within one solve (a
     stream's sweeps: the top-tier iterations share their first steps), keyed by it."""
+    helper: Any = field(default=None, repr=False)
+    """An :class:`ldhp_tamp.parallel.Helper` forked with ``(world,)`` for the streams'
+    sweeps on the other core, or ``None``."""
 
     @property
     def start_free(self) -> bool:

@@ -30,7 +30,8 @@ from ldhp_tamp import budget, symbolic
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
 from ldhp_tamp.errors import TimeBudgetExceeded
-from ldhp_tamp.grasp_graph import GraspPlanner, GraspPlanStatus
+from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanStatus
+from ldhp_tamp.parallel import Helper, cores
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family, check_against_domain
@@ -63,6 +64,10 @@ class SolveOptions:
     """Wall-time budget of the whole solve in seconds (both tiers, every engine); when it
     runs out the solve fails with a reason starting ``timeout``. ``None``: no limit."""
     domain: Path | None = None  # a .pddl file used instead of the scenario's domain (ablate)
+    helpers: bool = True
+    """On a machine with more than one core, let two helper processes (forked after the
+    setup) take half of the streams' sweeps and of the bottom tier's G_m computations;
+    the plans are the same either way."""
 
 
 @dataclass
@@ -173,121 +178,132 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     ctx = replace(ctx, grasps=grasps)  # air-move lifts and placements need a carrying grasp
     transitions = admissible_transitions(ctx, domain.info, REGISTRY)
     adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
-    grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release)
+    grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release,
+                                 GraspGraphOptions(helper=options.helpers))
     clock.setup = time.perf_counter() - clock.start
     budget.check(deadline, "the setup (contact-state graph, admissible transitions)")
     say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
         f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 
-    forbidden: set[Transition | Sequel] = set()
-    failures: list[str] = []
-    for iteration in range(1, h_max + 1):
-        c.top_iterations = iteration
-        budget.check(deadline, f"the top tier, before iteration {iteration}")
-        # ---- top tier, step 2: contact-state plan -------------------------------------
-        t0 = time.perf_counter()
-        allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in forbidden)
-                   for a, pairs in transitions.items()}
-        keep = relevant_states(ctx, allowed)
-        graph = symbolic.ContactGraph(
-            states=tuple(s for s in ctx.states if s in keep),
-            transitions={a: frozenset(p for p in pairs if p[0] in keep and p[1] in keep) for a, pairs in allowed.items()},
-            start=ctx.start_state, goal=ctx.goal_state,
-            start_touching=scenario.start_grasp is not None, goal_release=scenario.goal_release)
-        problem = symbolic.build_problem(domain, graph, forbidden=frozenset(forbidden))
-        if options.emit_pddl is not None:
-            symbolic.emit_pddl(options.emit_pddl, problem, iteration)
-        sres = symbolic.solve(problem, engine, timeout_s=budget.remaining(deadline))
-        clock.symbolic += time.perf_counter() - t0
-        if sres.status is symbolic.SymbolicStatus.TIMEOUT and deadline is not None:
-            raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({sres.reason})")
-        if not sres.solved:
-            why = f"symbolic tier ({engine}): {sres.reason}"
-            if sres.status is symbolic.SymbolicStatus.UNSOLVABLE and not any(
-                    b == ctx.goal_state for pairs in allowed.values() for _, b in pairs):
-                why += (f"; no admissible{' and unforbidden' if forbidden else ''} transition of a declared "
-                        f"MoveObject primitive enters {ctx.goal_state.name}")
-            if failures:  # the cause is what failed geometrically; the symbolic tier ran out of plans
-                names = sorted(f.label for f in forbidden)
-                shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
-                why = "; ".join(failures[-5:]) + f"; after forbidding {shown}, the {why}"
-            return _failed(scenario, engine, why, c, clock)
-        planned = [a.transition for a in sres.actions if a.transition is not None]
-        say(f"iteration {iteration}: " + (" -> ".join(str(a) for a in sres.actions) or "(the empty plan)"))
+    if options.helpers and cores() > 1:
+        try:
+            ctx = replace(ctx, helper=Helper((world,)))  # the streams' sweeps, two at a time
+        except (OSError, RuntimeError) as exc:
+            log.debug("no helper process for the streams: %s", exc)
+    try:  # the helper processes end with the solve, however it ends
+        forbidden: set[Transition | Sequel] = set()
+        failures: list[str] = []
+        for iteration in range(1, h_max + 1):
+            c.top_iterations = iteration
+            budget.check(deadline, f"the top tier, before iteration {iteration}")
+            # ---- top tier, step 2: contact-state plan -------------------------------------
+            t0 = time.perf_counter()
+            allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in forbidden)
+                       for a, pairs in transitions.items()}
+            keep = relevant_states(ctx, allowed)
+            graph = symbolic.ContactGraph(
+                states=tuple(s for s in ctx.states if s in keep),
+                transitions={a: frozenset(p for p in pairs if p[0] in keep and p[1] in keep) for a, pairs in allowed.items()},
+                start=ctx.start_state, goal=ctx.goal_state,
+                start_touching=scenario.start_grasp is not None, goal_release=scenario.goal_release)
+            problem = symbolic.build_problem(domain, graph, forbidden=frozenset(forbidden))
+            if options.emit_pddl is not None:
+                symbolic.emit_pddl(options.emit_pddl, problem, iteration)
+            sres = symbolic.solve(problem, engine, timeout_s=budget.remaining(deadline))
+            clock.symbolic += time.perf_counter() - t0
+            if sres.status is symbolic.SymbolicStatus.TIMEOUT and deadline is not None:
+                raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({sres.reason})")
+            if not sres.solved:
+                why = f"symbolic tier ({engine}): {sres.reason}"
+                if sres.status is symbolic.SymbolicStatus.UNSOLVABLE and not any(
+                        b == ctx.goal_state for pairs in allowed.values() for _, b in pairs):
+                    why += (f"; no admissible{' and unforbidden' if forbidden else ''} transition of a declared "
+                            f"MoveObject primitive enters {ctx.goal_state.name}")
+                if failures:  # the cause is what failed geometrically; the symbolic tier ran out of plans
+                    names = sorted(f.label for f in forbidden)
+                    shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+                    why = "; ".join(failures[-5:]) + f"; after forbidding {shown}, the {why}"
+                return _failed(scenario, engine, why, c, clock)
+            planned = [a.transition for a in sres.actions if a.transition is not None]
+            say(f"iteration {iteration}: " + (" -> ".join(str(a) for a in sres.actions) or "(the empty plan)"))
 
-        # ---- top tier, step 3 + bottom tier --------------------------------------------
-        stream_stats = StreamStats()
-        search = PathSearch(ctx, planned, domain.info, REGISTRY, rng, stream_stats, deadline=deadline)
-        seen_paths: set[bytes] = set()
-        failed_steps: list[int] = []  # the planned step at which each pose path failed
-        failed_step: int | None = None
-        tried = 0
-        while tried < options.pose_paths_per_plan:
-            ts = time.perf_counter()
-            try:
-                path = search.next(failed_step)
-            finally:  # a timeout's time counts too
-                clock.streams += time.perf_counter() - ts
-            if path is None:
-                break
-            key = b"".join(seg.primitive.encode() + np.asarray(seg.poses).tobytes() for seg in path.segments)
-            if key in seen_paths:
-                failed_step = None
-                continue  # the streams can reach the same path twice (e.g. via an in-state alignment)
-            seen_paths.add(key)
-            tried += 1
-            c.pose_paths += 1
-            outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline)
-            if outcome.steps is not None:
-                steps = outcome.steps
-                plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, steps,
-                            _stats(engine, c, clock))
-                report = validate_plan(plan, scenario)
-                if report.valid:
-                    say(f"solved in {clock.as_dict()['total']:.2f} s")
-                    return SolveResult(SolveStatus.SOLVED, plan)
-                msg = "; ".join(v.message for v in report.violations[:3])
-                log.warning("the bottom tier's plan does not validate (%d violations: %s); "
-                            "treating it as a failure", len(report.violations), msg)
-                failures.append(f"plan failed validation ({msg})")
-                failed_step = None
-                continue
-            failures.append(outcome.reason)
-            seg = outcome.segment
-            failed_step = seg.step if seg is not None and 0 <= seg.step < len(planned) else None
-            log.info("iteration %d, pose path %d (%s) failed at step %s: %s", iteration, tried,
-                     " ".join(f"{s.primitive}@{s.step}" for s in path.segments), failed_step, outcome.reason)
-            if failed_step is not None:
-                failed_steps.append(failed_step)
-        log.info("iteration %d: %d pose path(s) tried; streams: %d samples drawn, %d sample calls%s, "
-                 "dead ends at steps %s, %d alignment failure(s)", iteration, tried, stream_stats.expansions,
-                 stream_stats.sample_calls, " (work budget spent)" if stream_stats.budget_exhausted else "",
-                 dict(stream_stats.dead_steps), sum(stream_stats.alignment_failures.values()))
-        # ---- feedback: forbid what failed, re-plan ------------------------------------
-        if stream_stats.dead_ends:
-            failures.append("no stream sample for " + ", ".join(t.label for t in stream_stats.dead_ends))
-        # The deepest step the bottom tier failed at (the paths that failed earlier were
-        # varied there and got past it); when no path reached it, the deepest dead end of
-        # the streams. Dead ends found after a bottom-tier failure, while the search tried
-        # the failed step's other samples, only say those samples were no better.
-        deepest = max(failed_steps or list(stream_stats.dead_steps), default=None)
-        if deepest is None and planned and tried == 0:
-            # the streams ran out of work before any dead end: blame their frontier
-            deepest = min(max(stream_stats.deepest, 0), len(planned) - 1)
-        if deepest is None and tried == 0:
-            within = ", ".join(sorted(s.name for s in stream_stats.alignment_failures)) or ctx.goal_state.name
-            return _failed(scenario, engine, "top tier, step 3: the contact-state plan needs no change of "
-                           f"contact state (start and goal are both in {ctx.goal_state.name}), but no in-state "
-                           "motion (a push, a tip then a push, or a biplanar slide) takes the object from the "
-                           f"start pose to the goal pose without leaving {within}", c, clock)
-        if deepest is None:
-            return _failed(scenario, engine, "top tier: the contact-state plan needs no object motion "
-                           "but the bottom tier found no grasp sequence: " + "; ".join(failures[-3:]), c, clock)
-        culprits = _culprits(planned, deepest, forbidden)
-        forbidden.update(culprits)
-        say(f"iteration {iteration} failed; forbidding " + ", ".join(q.label for q in culprits))
-    return _failed(scenario, engine, f"no feasible plan after {h_max} top-tier iterations (H_max): "
-                   + "; ".join(failures[-5:]), c, clock)
+            # ---- top tier, step 3 + bottom tier --------------------------------------------
+            stream_stats = StreamStats()
+            search = PathSearch(ctx, planned, domain.info, REGISTRY, rng, stream_stats, deadline=deadline)
+            seen_paths: set[bytes] = set()
+            failed_steps: list[int] = []  # the planned step at which each pose path failed
+            failed_step: int | None = None
+            tried = 0
+            while tried < options.pose_paths_per_plan:
+                ts = time.perf_counter()
+                try:
+                    path = search.next(failed_step)
+                finally:  # a timeout's time counts too
+                    clock.streams += time.perf_counter() - ts
+                if path is None:
+                    break
+                key = b"".join(seg.primitive.encode() + np.asarray(seg.poses).tobytes() for seg in path.segments)
+                if key in seen_paths:
+                    failed_step = None
+                    continue  # the streams can reach the same path twice (e.g. via an in-state alignment)
+                seen_paths.add(key)
+                tried += 1
+                c.pose_paths += 1
+                outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline)
+                if outcome.steps is not None:
+                    steps = outcome.steps
+                    plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, steps,
+                                _stats(engine, c, clock))
+                    report = validate_plan(plan, scenario)
+                    if report.valid:
+                        say(f"solved in {clock.as_dict()['total']:.2f} s")
+                        return SolveResult(SolveStatus.SOLVED, plan)
+                    msg = "; ".join(v.message for v in report.violations[:3])
+                    log.warning("the bottom tier's plan does not validate (%d violations: %s); "
+                                "treating it as a failure", len(report.violations), msg)
+                    failures.append(f"plan failed validation ({msg})")
+                    failed_step = None
+                    continue
+                failures.append(outcome.reason)
+                seg = outcome.segment
+                failed_step = seg.step if seg is not None and 0 <= seg.step < len(planned) else None
+                log.info("iteration %d, pose path %d (%s) failed at step %s: %s", iteration, tried,
+                         " ".join(f"{s.primitive}@{s.step}" for s in path.segments), failed_step, outcome.reason)
+                if failed_step is not None:
+                    failed_steps.append(failed_step)
+            log.info("iteration %d: %d pose path(s) tried; streams: %d samples drawn, %d sample calls%s, "
+                     "dead ends at steps %s, %d alignment failure(s)", iteration, tried, stream_stats.expansions,
+                     stream_stats.sample_calls, " (work budget spent)" if stream_stats.budget_exhausted else "",
+                     dict(stream_stats.dead_steps), sum(stream_stats.alignment_failures.values()))
+            # ---- feedback: forbid what failed, re-plan ------------------------------------
+            if stream_stats.dead_ends:
+                failures.append("no stream sample for " + ", ".join(t.label for t in stream_stats.dead_ends))
+            # The deepest step the bottom tier failed at (the paths that failed earlier were
+            # varied there and got past it); when no path reached it, the deepest dead end of
+            # the streams. Dead ends found after a bottom-tier failure, while the search tried
+            # the failed step's other samples, only say those samples were no better.
+            deepest = max(failed_steps or list(stream_stats.dead_steps), default=None)
+            if deepest is None and planned and tried == 0:
+                # the streams ran out of work before any dead end: blame their frontier
+                deepest = min(max(stream_stats.deepest, 0), len(planned) - 1)
+            if deepest is None and tried == 0:
+                within = ", ".join(sorted(s.name for s in stream_stats.alignment_failures)) or ctx.goal_state.name
+                return _failed(scenario, engine, "top tier, step 3: the contact-state plan needs no change of "
+                               f"contact state (start and goal are both in {ctx.goal_state.name}), but no in-state "
+                               "motion (a push, a tip then a push, or a biplanar slide) takes the object from the "
+                               f"start pose to the goal pose without leaving {within}", c, clock)
+            if deepest is None:
+                return _failed(scenario, engine, "top tier: the contact-state plan needs no object motion "
+                               "but the bottom tier found no grasp sequence: " + "; ".join(failures[-3:]), c, clock)
+            culprits = _culprits(planned, deepest, forbidden)
+            forbidden.update(culprits)
+            say(f"iteration {iteration} failed; forbidding " + ", ".join(q.label for q in culprits))
+        return _failed(scenario, engine, f"no feasible plan after {h_max} top-tier iterations (H_max): "
+                       + "; ".join(failures[-5:]), c, clock)
+    finally:
+        grasp_planner.close()
+        if ctx.helper is not None:
+            ctx.helper.close()
 
 
 #: A transition after which this many different transitions have failed is itself

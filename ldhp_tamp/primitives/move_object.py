@@ -111,11 +111,9 @@ class _Swept:
     def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
                start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment]:
         scored: list[tuple[float, int, Segment]] = []
-        for motion, s_max, params in self.families(ctx, start_pose):
-            key = ("sweep", motion, s_max)  # a pure function of them: iterations share steps
-            sw = ctx.memo.get(key)
-            if sw is None:
-                sw = ctx.memo[key] = sweep(ctx.world, motion, s_max)
+        families = list(self.families(ctx, start_pose))
+        sweeps = _stream_sweeps(ctx, [(motion, s_max) for motion, s_max, _ in families])
+        for (motion, s_max, params), sw in zip(families, sweeps):
             for s_end in _end_values(ctx, sw, from_state, to_state):
                 seg = self._segment(ctx, motion, s_end, from_state, to_state, params)
                 score = float(ctx.goal_distance(seg.poses[-1:])[0])
@@ -132,6 +130,37 @@ class _Swept:
         else:
             p["angle"] = round(math.degrees(s_end), 6)
         return Segment(self.name, from_state, to_state, motion, 0.0, s_end, ctx.world, p)
+
+
+def _stream_sweeps(ctx: PlanningContext, jobs: list[tuple[Motion, float]]) -> list[Sweep]:
+    """The streams' sweep of each (motion, s_max): memoised for the solve (a pure
+    function of them; the top-tier iterations share their first steps), two at a time
+    when the context has a helper process (``ctx.helper``, forked with the world), one in
+    it and one here."""
+    out: list[Sweep | None] = [ctx.memo.get(("sweep", m, s)) for m, s in jobs]
+    todo = [i for i, sw in enumerate(out) if sw is None]
+    helper = ctx.helper if ctx.helper is not None and ctx.helper.alive else None
+    step = 2 if helper is not None else 1
+    for j in range(0, len(todo), step):
+        mine = todo[j]
+        theirs = todo[j + 1] if step == 2 and j + 1 < len(todo) else None
+        if theirs is not None:
+            assert helper is not None
+            helper.submit(_helper_sweep, *jobs[theirs])
+        try:
+            out[mine] = sweep(ctx.world, *jobs[mine])
+        finally:
+            if theirs is not None:
+                out[theirs] = helper.result()
+        for i in (mine, theirs):
+            if i is not None:
+                ctx.memo[("sweep", *jobs[i])] = out[i]
+    return out  # type: ignore[return-value]
+
+
+def _helper_sweep(state: tuple[Any, ...], motion: Motion, s_max: float) -> Sweep:
+    """A stream's sweep in the helper process, whose state starts with the world."""
+    return sweep(state[0], motion, s_max)
 
 
 def _end_values(ctx: PlanningContext, sw: Sweep, from_state: ContactState, to_state: ContactState) -> list[float]:

@@ -89,3 +89,16 @@ def test_the_pick_and_task1_plans_are_the_same_in_processes_with_other_hash_seed
     here = [_without_timing(solve(load_scenario(PICK)).plan)]
     assert [json.loads(line) for line in first.splitlines()][:1] == here
     assert all(json.loads(line)["status"] == "solved" for line in first.splitlines())
+
+
+def test_the_helper_processes_change_no_plan() -> None:
+    """Two processes (the streams' sweeps and G_m shared with helpers) or one: the same
+    plan file, byte for byte apart from the timings."""
+    from ldhp_tamp.tamp import SolveOptions
+
+    def plan_of(helpers: bool) -> dict:
+        data = json.loads(plan_to_json(solve(load_scenario(TASK1), SolveOptions(helpers=helpers)).plan))
+        del data["stats"]["time_s"]
+        return data
+
+    assert plan_of(True) == plan_of(False)
