@@ -107,8 +107,8 @@ class PlanningContext:
     """Results the streams may compute again for the same input within one solve (a
     stream's sweeps: the top-tier iterations share their first steps), keyed by it."""
     helper: Any = field(default=None, repr=False)
-    """An :class:`ldhp_tamp.parallel.Helper` forked with ``(world,)`` for the streams'
-    sweeps on the other core, or ``None``."""
+    """``None``, or a function returning a live :class:`ldhp_tamp.parallel.Helper` whose
+    state starts with the world (or ``None``): the streams' sweeps may run there."""
 
     @property
     def start_free(self) -> bool:

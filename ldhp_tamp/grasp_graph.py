@@ -496,6 +496,12 @@ class GraspPlanner:
             self._helper.close()
             self._helper = None
 
+    def live_helper(self) -> Helper | None:
+        """The helper process if one is running (none is started here); its state is
+        ``(world, grasps, motion options)``."""
+        h = self._helper
+        return h if h is not None and h.alive else None
+
     def _helper_process(self) -> Helper | None:
         if not self.options.helper or cores() < 2:
             return None

@@ -31,7 +31,6 @@ from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
 from ldhp_tamp.errors import TimeBudgetExceeded
 from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanStatus
-from ldhp_tamp.parallel import Helper, cores
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family, check_against_domain
@@ -65,9 +64,9 @@ class SolveOptions:
     runs out the solve fails with a reason starting ``timeout``. ``None``: no limit."""
     domain: Path | None = None  # a .pddl file used instead of the scenario's domain (ablate)
     helpers: bool = True
-    """On a machine with more than one core, let two helper processes (forked after the
-    setup) take half of the streams' sweeps and of the bottom tier's G_m computations;
-    the plans are the same either way."""
+    """On a machine with more than one core, let a helper process (forked by the bottom
+    tier with the grasp set) take half of the G_T and G_m computations and of the streams'
+    sweeps; the plans are the same either way."""
 
 
 @dataclass
@@ -185,12 +184,9 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
         f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 
-    if options.helpers and cores() > 1:
-        try:
-            ctx = replace(ctx, helper=Helper((world,)))  # the streams' sweeps, two at a time
-        except (OSError, RuntimeError) as exc:
-            log.debug("no helper process for the streams: %s", exc)
-    try:  # the helper processes end with the solve, however it ends
+    # the streams' sweeps, two at a time, with the bottom tier's helper once it has one
+    ctx = replace(ctx, helper=grasp_planner.live_helper)
+    try:  # the helper process ends with the solve, however it ends
         forbidden: set[Transition | Sequel] = set()
         failures: list[str] = []
         for iteration in range(1, h_max + 1):
@@ -302,8 +298,6 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                        + "; ".join(failures[-5:]), c, clock)
     finally:
         grasp_planner.close()
-        if ctx.helper is not None:
-            ctx.helper.close()
 
 
 #: A transition after which this many different transitions have failed is itself

@@ -135,11 +135,11 @@ class _Swept:
 def _stream_sweeps(ctx: PlanningContext, jobs: list[tuple[Motion, float]]) -> list[Sweep]:
     """The streams' sweep of each (motion, s_max): memoised for the solve (a pure
     function of them; the top-tier iterations share their first steps), two at a time
-    when the context has a helper process (``ctx.helper``, forked with the world), one in
-    it and one here."""
+    when the context offers a live helper process (``ctx.helper``), one in it and one
+    here."""
     out: list[Sweep | None] = [ctx.memo.get(("sweep", m, s)) for m, s in jobs]
     todo = [i for i, sw in enumerate(out) if sw is None]
-    helper = ctx.helper if ctx.helper is not None and ctx.helper.alive else None
+    helper = ctx.helper() if ctx.helper is not None else None
     step = 2 if helper is not None else 1
     for j in range(0, len(todo), step):
         mine = todo[j]
