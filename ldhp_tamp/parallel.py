@@ -1,11 +1,14 @@
 """Independent work of one solve on the machine's cores, in forked children.
 
-:func:`fork_map` applies a function to a list of items: the parent process takes one
-share, each other core a forked child, which inherits everything the parent has built
-(the world, the contact states, the grasp set) for free and sends only its results back
-through a pipe, pickled. It serves the setup's transition sweeps, hundreds of small
-independent computations of a few milliseconds each; a pool of workers would have to be
-sent the world first and would cost more than it saves.
+Two tools. :func:`fork_map` applies a function to a list of items: the parent process
+takes one share, each other core a forked child, which inherits everything the parent
+has built (the world, the contact states, the grasp set) for free and sends only its
+results back through a pipe, pickled. It serves the setup's transition sweeps, hundreds
+of small independent computations of a few milliseconds each; a pool of workers would
+have to be sent the world first and would cost more than it saves. :class:`Helper` is
+one long-lived child for work that comes one piece at a time (the bottom tier's G_m and
+G_T, the streams' sweeps): the solve hands it the next piece and computes the current
+one itself.
 
 The results are those of ``[fn(x) for x in items]``, in that order, whatever the number
 of cores: each item is computed by exactly one process, by the same code. An exception
