@@ -71,11 +71,12 @@ from ldhp_tamp.primitives.adjust_grasp import (
     AdjustContext,
     AdjustGraspOptions,
     CheckFailure,
+    CheckResult,
     IntraEdges,
     LazyAdjustGrasp,
     motion_waypoints,
 )
-from ldhp_tamp.primitives.registry import Binding, Family
+from ldhp_tamp.primitives.registry import REGISTRY, Binding, Family
 from ldhp_tamp.streams import PosePath
 
 __all__ = [
@@ -507,7 +508,7 @@ class GraspPlanner:
             return None
         if self._helper is None or not self._helper.alive:
             try:
-                self._helper = Helper((self.world, self.grasps, self.options.motion))
+                self._helper = Helper((self.world, self.grasps, self.options.motion, self.context))
             except (OSError, RuntimeError) as exc:  # no fork: one core it is
                 log.debug("no helper process: %s", exc)
                 self._helper = None
@@ -833,10 +834,23 @@ class GraspPlanner:
                picks: dict[tuple[int, int], IntArray], search: _Search) -> None:
         """Check the picked candidate edges, one vectorised call per layer and primitive,
         and record the outcome in the candidates' ``valid`` arrays."""
+        helper = self.live_helper()
         for (k, pi), idx in picks.items():
             prim = self.primitives[pi]
             cd = cands[k][pi]
-            res = prim.impl.check(ctx, Pose.from_array(layers[k].pose), cd.edges.take(idx))
+            pose = Pose.from_array(layers[k].pose)
+            if helper is not None and idx.size >= 2 * _MIN_SHARED_CHECKS:
+                # half of the edges checked in the helper process meanwhile, the same way
+                half = idx.size // 2
+                helper.submit(_helper_check, prim.name, layers[k].pose, cd.edges.take(idx[half:]))
+                try:
+                    mine = prim.impl.check(ctx, pose, cd.edges.take(idx[:half]))
+                finally:
+                    theirs = helper.result()
+                res = CheckResult(np.concatenate([mine.ok, theirs.ok]), np.concatenate([mine.failure, theirs.failure]),
+                                  mine.feasibility_checks + theirs.feasibility_checks, mine.samples + theirs.samples)
+            else:
+                res = prim.impl.check(ctx, pose, cd.edges.take(idx))
             cd.valid[idx] = np.where(res.ok, 1, -1)
             search.checked += idx.size
             search.checks += res.feasibility_checks
@@ -1154,14 +1168,24 @@ def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[F
 
 def _helper_pose(state: tuple[World, GraspSet, MotionCheckOptions], pose: FloatArray, tol: float) -> IntArray:
     """A G_T computed in the helper process (see :meth:`GraspPlanner._pose_sets_paired`)."""
-    world, grasps, _ = state
+    world, grasps = state[0], state[1]
     return pose_conditioned(world, grasps, pose, tol)
+
+
+#: Fewer intra-pose edges than twice this in one check are not shared with the helper.
+_MIN_SHARED_CHECKS = 32
+
+
+def _helper_check(state: tuple[Any, ...], name: str, pose: FloatArray, edges: IntraEdges) -> CheckResult:
+    """AdjustGrasp edges checked in the helper process (see :meth:`GraspPlanner._check`),
+    with its copy of the primitives' context."""
+    return REGISTRY.binding(name).implementation.check(state[3], Pose.from_array(pose), edges)
 
 
 def _helper_motion(state: tuple[World, GraspSet, MotionCheckOptions], poses: FloatArray, cand: IntArray,
                    verified: IntArray, recheck: IntArray, ends: tuple[int, ...]) -> MotionGrasps:
     """A G_m computed in the helper process (see :meth:`GraspPlanner._motion_ahead`)."""
-    world, grasps, options = state
+    world, grasps, options = state[0], state[1], state[2]
     return motion_conditioned(world, grasps, poses, cand, options, verified=verified, recheck=recheck, rate=False,
                               free_at=ends)
 
