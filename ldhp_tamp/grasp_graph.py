@@ -128,9 +128,11 @@ class GraspGraphOptions:
         Poses whose candidate intra-pose edges (and what was learnt of them) are kept
         between solves, least recently used dropped first (each costs ~1-30 MB).
     helper : bool
-        On a machine with more than one core, compute the G_m of two segments at once,
-        one in a helper process forked with the grasp set (:class:`ldhp_tamp.parallel.Helper`);
-        the same sets either way. :meth:`GraspPlanner.close` ends it.
+        On a machine with more than one core, share the work with a helper process forked
+        with the grasp set (:class:`ldhp_tamp.parallel.Helper`): the next uncached G_T and
+        G_m while this process computes the current one, half of a LazySP round's larger
+        edge checks, and (through :meth:`GraspPlanner.live_helper`) the streams' sweeps;
+        the same results either way. :meth:`GraspPlanner.close` ends it.
     """
 
     adjust: AdjustGraspOptions = AdjustGraspOptions()
@@ -499,7 +501,7 @@ class GraspPlanner:
 
     def live_helper(self) -> Helper | None:
         """The helper process if one is running (none is started here); its state is
-        ``(world, grasps, motion options)``."""
+        ``(world, grasps, motion options, AdjustGrasp context)``."""
         h = self._helper
         return h if h is not None and h.alive else None
 
@@ -1166,7 +1168,7 @@ def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[F
     return {key: np.array(sorted(v), dtype=np.int64) for key, v in picked.items() if v}
 
 
-def _helper_pose(state: tuple[World, GraspSet, MotionCheckOptions], pose: FloatArray, tol: float) -> IntArray:
+def _helper_pose(state: tuple[Any, ...], pose: FloatArray, tol: float) -> IntArray:
     """A G_T computed in the helper process (see :meth:`GraspPlanner._pose_sets_paired`)."""
     world, grasps = state[0], state[1]
     return pose_conditioned(world, grasps, pose, tol)
@@ -1182,7 +1184,7 @@ def _helper_check(state: tuple[Any, ...], name: str, pose: FloatArray, edges: In
     return REGISTRY.binding(name).implementation.check(state[3], Pose.from_array(pose), edges)
 
 
-def _helper_motion(state: tuple[World, GraspSet, MotionCheckOptions], poses: FloatArray, cand: IntArray,
+def _helper_motion(state: tuple[Any, ...], poses: FloatArray, cand: IntArray,
                    verified: IntArray, recheck: IntArray, ends: tuple[int, ...]) -> MotionGrasps:
     """A G_m computed in the helper process (see :meth:`GraspPlanner._motion_ahead`)."""
     world, grasps, options = state[0], state[1], state[2]
