@@ -29,7 +29,7 @@ from typing import Iterator
 
 from ldhp_tamp.errors import TimeBudgetExceeded
 
-__all__ = ["ALARM_GRACE_S", "Budget", "alarm", "check", "expired", "remaining"]
+__all__ = ["ALARM_GRACE_S", "Budget", "alarm", "alarm_armed", "check", "expired", "remaining"]
 
 #: How long after the deadline :func:`alarm` interrupts: the cooperative checks, which
 #: name their stage precisely, normally come first.
@@ -115,17 +115,29 @@ def alarm(deadline: float | None, grace: float = ALARM_GRACE_S) -> Iterator[None
     if not usable:
         yield
         return
+    global _ALARMS
 
     def on_alarm(signum: int, frame: FrameType | None) -> None:
         raise TimeBudgetExceeded(f"{_innermost(frame)} (interrupted: it has no deadline checks of its own)")
 
     previous = signal.signal(signal.SIGALRM, on_alarm)
+    _ALARMS += 1
     try:
         signal.setitimer(signal.ITIMER_REAL, max(deadline + grace - time.perf_counter(), 1e-3), max(grace, 1e-2))
         yield
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
+        _ALARMS -= 1
+
+
+_ALARMS = 0  # alarm() bodies running with the signal armed
+
+
+def alarm_armed() -> bool:
+    """Whether an :func:`alarm` with its signal armed is running: pure-Python code that
+    has no deadline checks of its own will be interrupted."""
+    return _ALARMS > 0
 
 
 def _innermost(frame: FrameType | None) -> str:

@@ -51,7 +51,7 @@ from unified_planning.io import PDDLReader, PDDLWriter
 from unified_planning.shortcuts import get_environment
 
 from geometry.features import ContactState
-from ldhp_tamp.errors import DomainError, EngineError
+from ldhp_tamp.errors import DomainError, EngineError, TimeBudgetExceeded
 from ldhp_tamp.primitives.registry import (
     ActionInfo,
     DomainInfo,
@@ -599,6 +599,10 @@ _STATUS = {
 # (wastar for pyperplan, astar for pyperplan-opt) are exhaustive on a finite task, so
 # their "no plan" is a proof.
 _EXHAUSTIVE_ENGINES = frozenset({"pyperplan", "pyperplan-opt"})
+#: Engines that run as Python code in this process (no subprocess of their own), so that
+#: a signal can interrupt them: the TAMP loop runs them here when the budget's alarm is
+#: armed, instead of in a child process (which costs a fork per call).
+IN_PROCESS_ENGINES = frozenset({"pyperplan", "pyperplan-opt"})
 
 
 @dataclass(frozen=True)
@@ -721,6 +725,8 @@ def solve(problem: SymbolicProblem, engine: str = DEFAULT_ENGINE,
                 answer = _run_engine(problem, engine, timeout_s)
             else:
                 answer = _run_engine_in_child(problem, engine, timeout_s)
+    except TimeBudgetExceeded:  # the solve's budget interrupted the engine: not its failure
+        raise
     except Exception as exc:  # any engine failure is a result, not a crash
         elapsed = time.perf_counter() - start
         log.warning("engine %s failed: %s", engine, exc)

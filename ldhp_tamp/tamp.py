@@ -205,8 +205,16 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
             problem = symbolic.build_problem(domain, graph, forbidden=frozenset(forbidden))
             if options.emit_pddl is not None:
                 symbolic.emit_pddl(options.emit_pddl, problem, iteration)
-            sres = symbolic.solve(problem, engine, timeout_s=budget.remaining(deadline))
-            clock.symbolic += time.perf_counter() - t0
+            # A pure-Python engine under the armed alarm runs in this process (the alarm
+            # interrupts it at the deadline); otherwise in a child killed at the deadline.
+            here = deadline is not None and engine in symbolic.IN_PROCESS_ENGINES and budget.alarm_armed()
+            try:
+                sres = symbolic.solve(problem, engine, timeout_s=None if here else budget.remaining(deadline))
+            except TimeBudgetExceeded as exc:
+                raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({engine} hit the time "
+                                         f"limit, interrupted by the budget's alarm in {exc.where})") from exc
+            finally:
+                clock.symbolic += time.perf_counter() - t0
             if sres.status is symbolic.SymbolicStatus.TIMEOUT and deadline is not None:
                 raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({sres.reason})")
             if not sres.solved:

@@ -322,3 +322,17 @@ def test_cli_refuses_a_timeout_that_is_not_a_positive_number(value: str, tmp_pat
     assert info.value.code == EXIT_BAD_INPUT
     assert "--timeout" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def test_under_the_armed_alarm_pyperplan_runs_in_this_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pure-Python engine needs no child process when the budget's alarm can interrupt
+    it (a fork per iteration saved); the plan is the one the child would have found."""
+    reference = solve(load_scenario(PICK))  # no budget: in this process anyway
+
+    def no_child(problem, engine, timeout_s):
+        raise AssertionError("the engine ran in a child process")
+
+    monkeypatch.setattr(symbolic, "_run_engine_in_child", no_child)
+    result = solve(load_scenario(PICK), SolveOptions(timeout=60.0))
+    assert result.solved
+    assert [s.primitive for s in result.plan.steps] == [s.primitive for s in reference.plan.steps]
