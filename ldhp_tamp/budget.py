@@ -5,10 +5,12 @@ loop (the top-tier iterations, the streams, the grasp-graph search) call :func:`
 which raises :class:`~ldhp_tamp.errors.TimeBudgetExceeded` once it has passed; the TAMP
 loop turns that into a failed result (reason ``timeout: ...``). The symbolic engine call
 cannot be interrupted that way (pyperplan ignores unified-planning's timeout), so
-:mod:`ldhp_tamp.symbolic` runs it in a child process and kills it at the deadline. The
+:mod:`ldhp_tamp.symbolic` can run it in a child process and kill it at the deadline. The
 vectorised geometry (contact-state enumeration, grasp enumeration) has no checks of its
 own: :func:`alarm` is the backstop, a timer signal that raises the same exception from
-whatever Python code runs :data:`ALARM_GRACE_S` after the deadline.
+whatever Python code runs :data:`ALARM_GRACE_S` after the deadline; while it is armed
+(:func:`alarm_armed`) the TAMP loop runs a pure-Python engine in its own process, which
+the signal interrupts like any other code.
 
 >>> b = Budget.of(None)
 >>> b.deadline is None and not b.expired() and b.remaining() is None
