@@ -64,7 +64,7 @@ from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS
 from geometry.world import GripperState, PolylineGripper, World
 from ldhp_tamp import budget
-from ldhp_tamp.parallel import Helper, cores
+from ldhp_tamp.parallel import Helper, cores, two_at_a_time
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import Step, Waypoint
 from ldhp_tamp.primitives.adjust_grasp import (
@@ -518,16 +518,14 @@ class GraspPlanner:
 
     def _pose_sets_paired(self, poses: Sequence[FloatArray]) -> None:
         """G_T of the poses not cached yet, two at a time with the helper process."""
-        helper = self._helper_process()
         todo = list({p.tobytes(): p for p in poses if p.tobytes() not in self._pose_sets}.values())
-        if helper is None or len(todo) < 2:
+        if len(todo) < 2:
             return
-        for j in range(0, len(todo) - 1, 2):
-            helper.submit(_helper_pose, todo[j + 1], self.options.adjust.tol)
-            try:
-                self.pose_grasps(todo[j])
-            finally:
-                self._pose_sets[todo[j + 1].tobytes()] = helper.result()
+        tol = self.options.adjust.tol
+        done = two_at_a_time(self._helper_process(), todo, lambda p: pose_conditioned(self.world, self.grasps, p, tol),
+                             lambda p: (_helper_pose, (p, tol)))
+        for p, hit in zip(todo, done):
+            self._pose_sets[p.tobytes()] = hit
 
     def motion_grasps(self, segment: Segment, rate: bool = True) -> tuple[MotionGrasps, int, bool]:
         """G_m of a segment (cached by its primitive and dense poses): the value, the
@@ -692,6 +690,7 @@ class GraspPlanner:
         reach = [np.full(size, np.inf) for _ in layers]
         t_cand = t_reach = 0.0
         for k, layer in enumerate(layers):
+            budget.check(deadline, "the bottom tier, making the candidate AdjustGrasp edges")
             t0 = time.perf_counter()
             cands[k] = [self._candidates(ctx, layer, prim, search) for prim in self.primitives]
             lg[k] = self._layer_graph(cands[k], size)
@@ -708,6 +707,7 @@ class GraspPlanner:
         if (last[NO_CONTACT] if self.goal_release else last[layers[-1].members].min(initial=np.inf)) < np.inf:
             t1 = time.perf_counter()
             for k, seg in enumerate(segments):
+                budget.check(deadline, "the bottom tier, rating the grasp sets G_m")
                 mg = self.motion_grasps(seg)[0]
                 inter[k][mg.indices] = mg.quality  # opt sees it: the same arrays
             timings["motion_sets"] += time.perf_counter() - t1

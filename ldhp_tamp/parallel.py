@@ -26,11 +26,12 @@ import logging
 import os
 import pickle
 import signal
-from typing import Callable, Sequence, TypeVar
+import threading
+from typing import Callable, Iterator, Sequence, TypeVar
 
 from ldhp_tamp.errors import TimeBudgetExceeded
 
-__all__ = ["Helper", "cores", "fork_map"]
+__all__ = ["Helper", "cores", "fork_map", "two_at_a_time"]
 
 log = logging.getLogger(__name__)
 
@@ -96,22 +97,42 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None) 
 def _child(write_end: int, fn: Callable[[T], R], share: Sequence[T]) -> None:
     """A child's work: its share of the results, or what went wrong, pickled to the pipe."""
     signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the parent's alarm is the parent's
+    with os.fdopen(write_end, "wb") as pipe:
+        pipe.write(_pickled(_outcome(lambda: [fn(x) for x in share])))
+
+
+def _outcome(call: Callable[[], object]) -> tuple[str, object]:
+    """A child's answer for ``call()``: ("ok", value), ("timeout", stage), ("error",
+    exception) or, for an exception that cannot be pickled, ("failed", its text)."""
     try:
-        message: tuple[str, object] = ("ok", [fn(x) for x in share])
+        return "ok", call()
     except TimeBudgetExceeded as exc:
-        message = ("timeout", exc.where)
+        return "timeout", exc.where
     except BaseException as exc:  # raised again in the parent
         try:
             pickle.dumps(exc)
-            message = ("error", exc)
+            return "error", exc
         except Exception:
-            message = ("failed", f"{type(exc).__name__}: {exc}")
+            return "failed", f"{type(exc).__name__}: {exc}"
+
+
+def _pickled(message: tuple[str, object]) -> bytes:
     try:
-        data = pickle.dumps(message)
+        return pickle.dumps(message)
     except Exception as exc:
-        data = pickle.dumps(("failed", f"its results cannot be pickled: {type(exc).__name__}: {exc}"))
-    with os.fdopen(write_end, "wb") as pipe:
-        pipe.write(data)
+        return pickle.dumps(("failed", f"its results cannot be pickled: {type(exc).__name__}: {exc}"))
+
+
+def _answer(message: tuple[str, object], who: str) -> object:
+    """The value of an :func:`_outcome` message, or its error raised here."""
+    kind, payload = message
+    if kind == "timeout":
+        raise TimeBudgetExceeded(payload)  # type: ignore[arg-type]
+    if kind == "error":
+        raise payload  # type: ignore[misc]
+    if kind == "failed":
+        raise RuntimeError(f"{who} failed: {payload}")
+    return payload
 
 
 def _collect(pid: int, read_end: int, expected: int) -> list[R]:
@@ -130,13 +151,8 @@ def _collect(pid: int, read_end: int, expected: int) -> list[R]:
         _, status = os.waitpid(pid, 0)
     if not chunks:
         raise RuntimeError(f"a worker process of the solve died (wait status {status})")
-    kind, payload = pickle.loads(b"".join(chunks))
-    if kind == "timeout":
-        raise TimeBudgetExceeded(payload)
-    if kind == "error":
-        raise payload
-    if kind == "failed":
-        raise RuntimeError(f"a worker process of the solve failed: {payload}")
+    payload = _answer(pickle.loads(b"".join(chunks)), "a worker process of the solve")
+    assert isinstance(payload, list)
     if len(payload) != expected:
         raise RuntimeError(f"a worker process of the solve returned {len(payload)} results, not {expected}")
     return payload
@@ -189,34 +205,44 @@ class Helper:
         if not self._pending:
             raise RuntimeError("helper: no call pending")
         try:
-            kind, payload = self._conn.recv()
+            message = pickle.loads(self._conn.recv_bytes())
         except BaseException:
             self.close()  # interrupted (or the child died): its answer may still come
             raise
         self._pending = False
-        if kind == "timeout":
-            raise TimeBudgetExceeded(payload)
-        if kind == "error":
-            raise payload
-        if kind == "failed":
-            raise RuntimeError(f"the solve's helper process failed: {payload}")
-        return payload
+        return _answer(message, "the solve's helper process")  # type: ignore[return-value]
 
     def close(self) -> None:
-        """End the child and reap it (idempotent)."""
+        """End the child and reap it (idempotent). The budget's alarm is held off until
+        it is done, so that a close in a ``finally`` always reaps the child."""
         if not self.alive:
             return
         pid, self._pid = self._pid, -1
-        with contextlib.suppress(OSError):
-            self._conn.close()
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        with contextlib.suppress(ChildProcessError):
-            os.waitpid(pid, 0)
+        with _alarm_held():
+            with contextlib.suppress(OSError):
+                self._conn.close()
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+            with contextlib.suppress(ChildProcessError):
+                os.waitpid(pid, 0)
 
     def __del__(self) -> None:  # a helper nobody closed still ends its child
         with contextlib.suppress(Exception):
             self.close()
+
+
+@contextlib.contextmanager
+def _alarm_held() -> Iterator[None]:
+    """SIGALRM blocked in the body (where the platform and thread allow it); one that
+    came meanwhile is delivered when it ends."""
+    can = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+    if can:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGALRM})
+    try:
+        yield
+    finally:
+        if can:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGALRM})
 
 
 def _serve(conn: object, state: object) -> None:
@@ -227,17 +253,25 @@ def _serve(conn: object, state: object) -> None:
             fn, args = conn.recv()  # type: ignore[attr-defined]
         except (EOFError, OSError):
             return
+        conn.send_bytes(_pickled(_outcome(lambda: fn(state, *args))))  # type: ignore[attr-defined]
+
+
+def two_at_a_time(helper: Helper | None, items: Sequence[T], here: Callable[[T], R],
+                  there: Callable[[T], tuple[Callable[..., R], tuple[object, ...]]]) -> list[R]:
+    """``[here(x) for x in items]``, every second item computed by ``helper`` meanwhile
+    (``there(x)`` is its call: a module-level function of the helper's state and its
+    arguments); all here without a helper."""
+    out: list[R] = []
+    for j in range(0, len(items), 2 if helper is not None else 1):
+        pair = helper is not None and j + 1 < len(items)
+        if pair:
+            assert helper is not None
+            fn, args = there(items[j + 1])
+            helper.submit(fn, *args)
         try:
-            message: tuple[str, object] = ("ok", fn(state, *args))
-        except TimeBudgetExceeded as exc:
-            message = ("timeout", exc.where)
-        except BaseException as exc:
-            try:
-                pickle.dumps(exc)
-                message = ("error", exc)
-            except Exception:
-                message = ("failed", f"{type(exc).__name__}: {exc}")
-        try:
-            conn.send(message)  # type: ignore[attr-defined]
-        except Exception as exc:
-            conn.send(("failed", f"its result cannot be pickled: {type(exc).__name__}: {exc}"))  # type: ignore[attr-defined]
+            out.append(here(items[j]))
+        finally:
+            if pair:
+                assert helper is not None
+                out.append(helper.result())
+    return out

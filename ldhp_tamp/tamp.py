@@ -16,6 +16,7 @@ A solve never raises for an impossible task: it returns a :class:`SolveResult` w
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import logging
 import time
@@ -305,7 +306,9 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
         return _failed(scenario, engine, f"no feasible plan after {h_max} top-tier iterations (H_max): "
                        + "; ".join(failures[-5:]), c, clock)
     finally:
-        grasp_planner.close()
+        # cleanup: the outcome is decided, an alarm landing here must not replace it
+        with contextlib.suppress(TimeBudgetExceeded):
+            grasp_planner.close()
 
 
 #: A transition after which this many different transitions have failed is itself

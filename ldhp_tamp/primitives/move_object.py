@@ -33,7 +33,7 @@ from geometry.poses import Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL
 from geometry.world import PolylineGripper, TwoPointGripper, World
 from ldhp_tamp import budget
-from ldhp_tamp.parallel import fork_map
+from ldhp_tamp.parallel import fork_map, two_at_a_time
 from ldhp_tamp.path import Segment
 from ldhp_tamp.primitives.registry import REGISTRY, Family
 
@@ -139,22 +139,10 @@ def _stream_sweeps(ctx: PlanningContext, jobs: list[tuple[Motion, float]]) -> li
     here."""
     out: list[Sweep | None] = [ctx.memo.get(("sweep", m, s)) for m, s in jobs]
     todo = [i for i, sw in enumerate(out) if sw is None]
-    helper = ctx.helper() if ctx.helper is not None else None
-    step = 2 if helper is not None else 1
-    for j in range(0, len(todo), step):
-        mine = todo[j]
-        theirs = todo[j + 1] if step == 2 and j + 1 < len(todo) else None
-        if theirs is not None:
-            assert helper is not None
-            helper.submit(_helper_sweep, *jobs[theirs])
-        try:
-            out[mine] = sweep(ctx.world, *jobs[mine])
-        finally:
-            if theirs is not None:
-                out[theirs] = helper.result()
-        for i in (mine, theirs):
-            if i is not None:
-                ctx.memo[("sweep", *jobs[i])] = out[i]
+    done = two_at_a_time(ctx.helper() if ctx.helper is not None else None, [jobs[i] for i in todo],
+                         lambda job: sweep(ctx.world, *job), lambda job: (_helper_sweep, job))
+    for i, sw in zip(todo, done):
+        out[i] = ctx.memo[("sweep", *jobs[i])] = sw
     return out  # type: ignore[return-value]
 
 

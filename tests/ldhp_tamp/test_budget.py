@@ -289,12 +289,15 @@ def test_a_hanging_engine_is_a_timeout_of_the_symbolic_tier(hanging_engine) -> N
 
 
 def test_a_budget_shorter_than_task1_runs_out_in_the_bottom_tier() -> None:
-    # Task 1's setup takes ~0.2 s, and its first pose path's grasp graph runs from about
-    # 0.25 s to 0.6 s (the second from 0.6 s to 0.9 s).
+    # The budget ends 0.15 s into the first grasp plan (the proof that the first pose
+    # path has no grasp sequence, about 0.35 s), from this machine's own timings: fixed
+    # figures are too tight or too loose on a loaded machine.
+    t = solve(load_scenario(TASK1)).plan.stats.time_s
+    timeout = round(t["setup"] + t["symbolic"] + t["streams"] + 0.15, 3)
     t0 = time.perf_counter()
-    result = solve(load_scenario(TASK1), SolveOptions(timeout=0.4))
+    result = solve(load_scenario(TASK1), SolveOptions(timeout=timeout))
     elapsed = time.perf_counter() - t0
-    _assert_timed_out(result, 0.4, elapsed)
+    _assert_timed_out(result, timeout, elapsed)
     assert "bottom tier" in result.reason
     stats = result.plan.stats
     assert stats.top_iterations >= 1 and stats.feasibility_checks > 0 and stats.time_s["grasp_graph"] > 0
