@@ -152,6 +152,8 @@ class TwoPointGripper:
 
     finger_radius: float
     spacing: tuple[float, float]
+    max_force: float | None = None
+    """The largest normal force (N) one finger may apply; ``None``: unbounded."""
 
     @property
     def width_range(self) -> tuple[float, float]:
@@ -175,6 +177,8 @@ class PolylineGripper:
     finger: Polygon
     opening: tuple[float, float]
     palm: Polygon | None = None
+    max_force: float | None = None
+    """The largest normal force (N) one finger may apply; ``None``: unbounded."""
 
     @property
     def width_range(self) -> tuple[float, float]:

@@ -95,6 +95,9 @@ class PlannerSettings:
     max_refinements: int = 4
     seed: int = 0
     domain_path: Path | None = None
+    friction_margin: float = 0.0
+    """The planner plans with every coefficient scaled by ``1 - friction_margin``; plans
+    are judged (validated, simulated) with the scenario's own coefficients."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,6 +114,14 @@ class Scenario:
     start_grasp: GripperState | None
     goal_release: bool
     settings: PlannerSettings
+    start_grasp_any: bool = False
+    """``start_grasp = "any"``: the object starts held by a grasp the planner chooses
+    (``start_grasp`` is then ``None``)."""
+
+    @property
+    def starts_held(self) -> bool:
+        """The object starts in the gripper (a given ``start_grasp`` or ``"any"``)."""
+        return self.start_grasp is not None or self.start_grasp_any
 
 
 @dataclass(frozen=True)
@@ -215,13 +226,15 @@ def summarize(scenario: Scenario, contact_states: int | None = None) -> str:
     if scenario.start_grasp is not None:
         g = scenario.start_grasp
         lines.append(f"  start grasp: gripper {_pose(g.pose)}, width {_num(g.width)} mm")
+    elif scenario.start_grasp_any:
+        lines.append("  start grasp: any (the planner chooses one that holds the object)")
     lines.append(f"  goal release: {'yes' if scenario.goal_release else 'no'}")
     s = scenario.settings
     domain = s.domain if s.domain_path is None else f"{s.domain} ({s.domain_path})"
     lines.append(
         f"  planner: domain {domain}, engine {s.engine}, samples_per_edge {s.samples_per_edge}, "
         f"max_top_iterations {s.max_top_iterations}, max_refinements {s.max_refinements}, "
-        f"seed {s.seed}"
+        f"seed {s.seed}, friction_margin {_num(s.friction_margin)}"
     )
     if contact_states is not None:
         lines.append(f"  contact states: {contact_states}")
@@ -366,13 +379,13 @@ def _load_bytes(data: bytes, *, label: str, path: Path | None, base_dir: Path,
     gripper = _read_gripper(r, r.table(r.get(doc, "", "gripper"), "gripper"))
     friction = _read_friction(r, r.table(r.get(doc, "", "friction"), "friction"), obj, env)
     world = World(obj, env, gripper, friction)
-    start, goal, start_grasp, goal_release = _read_task(r, r.table(r.get(doc, "", "task"), "task"),
-                                                        world)
+    start, goal, start_grasp, goal_release, start_any = _read_task(
+        r, r.table(r.get(doc, "", "task"), "task"), world)
     settings = _read_planner(r, r.table(r.get(doc, "", "planner", {}), "planner"), base_dir,
                              check_planner)
     scenario = Scenario(name=name, description=description, path=path, sha256=sha, world=world,
                         start=start, goal=goal, start_grasp=start_grasp,
-                        goal_release=goal_release, settings=settings)
+                        goal_release=goal_release, settings=settings, start_grasp_any=start_any)
     log.debug("%s: loaded scenario %r", label, name)
     return scenario
 
@@ -422,7 +435,7 @@ def _read_environment(r: _Reader, t: Mapping[str, Any]) -> Environment:
 def _read_gripper(r: _Reader, t: Mapping[str, Any]) -> Gripper:
     model = r.string(r.get(t, "gripper", "model"), "gripper.model")
     if model == "two-point":
-        r.unknown_keys(t, "gripper", ("model", "finger_radius", "spacing"),
+        r.unknown_keys(t, "gripper", ("model", "finger_radius", "spacing", "max_force"),
                        note=" (not used by the two-point model)")
         radius = r.number(r.get(t, "gripper", "finger_radius"), "gripper.finger_radius")
         if radius <= 0:
@@ -431,9 +444,9 @@ def _read_gripper(r: _Reader, t: Mapping[str, Any]) -> Gripper:
         if spacing[0] < 2 * radius:
             log.warning("%s: gripper.spacing: minimum %s mm is below two finger radii (%s mm): "
                         "the fingers would overlap", r.label, _num(spacing[0]), _num(2 * radius))
-        return TwoPointGripper(radius, spacing)
+        return TwoPointGripper(radius, spacing, _max_force(r, t))
     if model == "polyline":
-        r.unknown_keys(t, "gripper", ("model", "finger", "opening", "palm"),
+        r.unknown_keys(t, "gripper", ("model", "finger", "opening", "palm", "max_force"),
                        note=" (not used by the polyline model)")
         finger = r.polygon(r.get(t, "gripper", "finger"), "gripper.finger")
         lo = finger.vertices.min(axis=0)
@@ -443,9 +456,20 @@ def _read_gripper(r: _Reader, t: Mapping[str, Any]) -> Gripper:
         opening = r.interval(r.get(t, "gripper", "opening"), "gripper.opening")
         palm_raw = r.get(t, "gripper", "palm", None)
         palm = None if palm_raw is None else r.polygon(palm_raw, "gripper.palm")
-        return PolylineGripper(finger, opening, palm)
+        return PolylineGripper(finger, opening, palm, _max_force(r, t))
     raise r.fail("gripper.model", f"unknown gripper model {model!r} "
                                   f"(expected one of {', '.join(map(repr, GRIPPER_MODELS))})")
+
+
+def _max_force(r: _Reader, t: Mapping[str, Any]) -> float | None:
+    """``gripper.max_force``: the largest normal force (N) of one finger; absent = unbounded."""
+    raw = r.get(t, "gripper", "max_force", None)
+    if raw is None:
+        return None
+    value = r.number(raw, "gripper.max_force")
+    if value <= 0:
+        raise r.fail("gripper.max_force", f"must be positive (newtons), got {_num(value)}")
+    return value
 
 
 _EDGE_NAME = {"e": re.compile(r"^e(\d+)$"), "l": re.compile(r"^l(\d+)$")}
@@ -508,7 +532,7 @@ def _read_friction(r: _Reader, t: Mapping[str, Any], obj: ObjectModel, env: Envi
 
 
 def _read_task(r: _Reader, t: Mapping[str, Any], world: World
-               ) -> tuple[Pose, Pose, GripperState | None, bool]:
+               ) -> tuple[Pose, Pose, GripperState | None, bool, bool]:
     r.unknown_keys(t, "task", ("start", "goal", "start_grasp", "goal_release"))
     start = r.pose(r.get(t, "task", "start"), "task.start")
     goal = r.pose(r.get(t, "task", "goal"), "task.goal")
@@ -523,7 +547,13 @@ def _read_task(r: _Reader, t: Mapping[str, Any], world: World
 
     grasp: GripperState | None = None
     raw = r.get(t, "task", "start_grasp", None)
-    if raw is not None:
+    start_any = False
+    if isinstance(raw, str):
+        if raw != "any":
+            raise r.fail("task.start_grasp", f"unknown value {raw!r}: a table "
+                                             "{ gripper = [x, y, phi], width = w } or the string \"any\"")
+        start_any = True
+    elif raw is not None:
         key = "task.start_grasp"
         g = r.table(raw, key)
         r.unknown_keys(g, key, ("gripper", "width"))
@@ -535,8 +565,20 @@ def _read_task(r: _Reader, t: Mapping[str, Any], world: World
                                          f"[{_num(lo)}, {_num(hi)}]")
         grasp = GripperState(pose, width)
         _check_grasp_clear(r, world, start, grasp)
+    if raw is None:
+        _check_start_supported(r, world, start)
     goal_release = r.boolean(r.get(t, "task", "goal_release", False), "task.goal_release")
-    return start, goal, grasp, goal_release
+    return start, goal, grasp, goal_release, start_any
+
+
+def _check_start_supported(r: _Reader, world: World, start: Pose) -> None:
+    """An object that starts free of the gripper must touch a solid (within 1 mm)."""
+    obj = shapely.Polygon(world.object_vertices(start))
+    gap = min(float(shapely.distance(obj, s.polygon.shapely)) for s in world.environment.solids)
+    if gap > VALIDATE_TOL:
+        raise r.fail("task.start", f"the object at {_pose(start)} touches nothing (the nearest solid is "
+                                   f"{_num(gap, 1)} mm away) and would fall: give a task.start_grasp "
+                                   "(or start_grasp = \"any\" to let the planner choose one)")
 
 
 def _check_grasp_clear(r: _Reader, world: World, start: Pose, grasp: GripperState) -> None:
@@ -565,7 +607,7 @@ def _check_grasp_clear(r: _Reader, world: World, start: Pose, grasp: GripperStat
 def _read_planner(r: _Reader, t: Mapping[str, Any], base_dir: Path, check: bool) -> PlannerSettings:
     d = PlannerSettings()
     r.unknown_keys(t, "planner", ("domain", "engine", "samples_per_edge", "max_top_iterations",
-                                  "max_refinements", "seed"))
+                                  "max_refinements", "seed", "friction_margin"))
     domain = r.string(r.get(t, "planner", "domain", d.domain), "planner.domain")
     engine = r.string(r.get(t, "planner", "engine", d.engine), "planner.engine")
     k = r.integer(r.get(t, "planner", "samples_per_edge", d.samples_per_edge),
@@ -583,6 +625,10 @@ def _read_planner(r: _Reader, t: Mapping[str, Any], base_dir: Path, check: bool)
     if seed < 0:
         raise r.fail("planner.seed", f"must be a non-negative integer, got {seed}")
 
+    margin = r.number(r.get(t, "planner", "friction_margin", d.friction_margin), "planner.friction_margin")
+    if not 0.0 <= margin < 1.0:
+        raise r.fail("planner.friction_margin", f"must lie in [0, 1), got {_num(margin)}")
+
     domain_path: Path | None = None
     if check:
         domain_path = find_domain(domain, base_dir)
@@ -599,7 +645,7 @@ def _read_planner(r: _Reader, t: Mapping[str, Any], base_dir: Path, check: bool)
     return PlannerSettings(domain=domain, engine=engine, samples_per_edge=k,
                            max_top_iterations=counts["max_top_iterations"],
                            max_refinements=counts["max_refinements"], seed=seed,
-                           domain_path=domain_path)
+                           domain_path=domain_path, friction_margin=margin)
 
 
 def _unknown_domain(domain: str, base_dir: Path) -> str:
@@ -673,13 +719,14 @@ def _describe_gripper(g: Gripper) -> str:
     def rng(lo: float, hi: float) -> str:
         return f"{_num(lo)} mm (fixed)" if lo == hi else f"{_num(lo)}..{_num(hi)} mm"
 
+    force = "unbounded" if g.max_force is None else f"at most {_num(g.max_force)} N"
     if isinstance(g, TwoPointGripper):
         return (f"two-point, finger radius {_num(g.finger_radius)} mm, spacing between centres "
-                f"{rng(*g.spacing)}")
+                f"{rng(*g.spacing)}, finger force {force}")
     lo, hi = g.finger.vertices.min(axis=0), g.finger.vertices.max(axis=0)
     palm = "none" if g.palm is None else f"{len(g.palm)}-gon"
     return (f"polyline, finger {len(g.finger)}-gon {_num(hi[0] - lo[0])} x {_num(hi[1] - lo[1])} "
-            f"mm, opening {rng(*g.opening)}, palm {palm}")
+            f"mm, opening {rng(*g.opening)}, palm {palm}, finger force {force}")
 
 
 def _describe_friction(f: Friction) -> str:

@@ -165,6 +165,10 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     check_against_domain(domain.info, REGISTRY)
     symbolic.check_engine(domain, engine)
     world = scenario.world
+    if scenario.start_grasp_any:
+        return _failed(scenario, engine, "bottom tier: start_grasp = \"any\" (a held start whose grasp the "
+                       "planner chooses) is not supported by this planner yet; give the start grasp as "
+                       "{ gripper = [x, y, phi], width = w }", c, clock)
 
     try:
         ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples,
@@ -202,7 +206,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                 states=tuple(s for s in ctx.states if s in keep),
                 transitions={a: frozenset(p for p in pairs if p[0] in keep and p[1] in keep) for a, pairs in allowed.items()},
                 start=ctx.start_state, goal=ctx.goal_state,
-                start_touching=scenario.start_grasp is not None, goal_release=scenario.goal_release)
+                start_touching=scenario.starts_held, goal_release=scenario.goal_release)
             problem = symbolic.build_problem(domain, graph, forbidden=frozenset(forbidden))
             if options.emit_pddl is not None:
                 symbolic.emit_pddl(options.emit_pddl, problem, iteration)

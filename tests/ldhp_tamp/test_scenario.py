@@ -128,6 +128,12 @@ BAD: dict[str, tuple[str | None, str]] = {
     "wrong_type_engine.toml": ("planner.engine", "expected a string"),
     "not_toml.toml": (None, "line 4"),
     "not_utf8.toml": (None, "not UTF-8"),
+    "zero_max_force.toml": ("gripper.max_force", "must be positive"),
+    "string_max_force.toml": ("gripper.max_force", "expected a number"),
+    "friction_margin_one.toml": ("planner.friction_margin", "[0, 1)"),
+    "negative_friction_margin.toml": ("planner.friction_margin", "[0, 1)"),
+    "start_grasp_unknown_string.toml": ("task.start_grasp", "'anything'"),
+    "start_touches_nothing.toml": ("task.start", "touches nothing"),
 }
 
 
@@ -274,6 +280,24 @@ def test_start_grasps_are_read() -> None:
     assert s.start_grasp.width == 100.0 and s.goal_release is True
     s2 = load_scenario(DATA / "good" / "two_point_start_grasp.toml")
     assert s2.start_grasp is not None and s2.start_grasp.width == 110.0
+
+
+def test_the_2026_12_keys_are_read() -> None:
+    s = load_scenario(DATA / "good" / "new_keys.toml")
+    assert s.world.gripper.max_force == 125.0
+    assert s.settings.friction_margin == pytest.approx(0.1)
+    assert s.start_grasp is None and s.start_grasp_any and s.starts_held
+    d = load_scenario(DATA / "good" / "defaults.toml")
+    assert d.world.gripper.max_force is None and d.settings.friction_margin == 0.0
+    assert not d.start_grasp_any and not d.starts_held
+
+
+def test_a_start_in_the_air_loads_with_a_start_grasp() -> None:
+    text = (DATA / "bad" / "start_touches_nothing.toml").read_text()
+    with pytest.raises(ScenarioError, match="start_grasp"):
+        load_scenario_string(text, "air")
+    held = text.replace("goal = [0, 100, 0]", 'goal = [0, 100, 0]\nstart_grasp = { gripper = [50, 70, -90], width = 60 }')
+    assert load_scenario_string(held, "air").start_grasp is not None
 
 
 def test_concave_object_with_explicit_com() -> None:
