@@ -253,6 +253,15 @@ class Friction:
         mu = self._object_side(self.object_edges_environment, obj_kind, obj_index, n_object)
         return self.environment if mu is None else mu
 
+    def scaled(self, factor: float) -> "Friction":
+        """Every coefficient (defaults and overrides) times ``factor`` (a planning margin:
+        ``1 - friction_margin``)."""
+        f = float(factor)
+        return Friction(self.environment * f, self.gripper * f,
+                        {k: v * f for k, v in self.environment_edges.items()},
+                        {k: v * f for k, v in self.object_edges_environment.items()},
+                        {k: v * f for k, v in self.object_edges_gripper.items()})
+
     def gripper_mu(self, obj_kind: str, obj_index: int, n_object: int) -> float:
         """Coefficient between a finger and an object feature (``"v"`` or ``"l"``)."""
         mu = self._object_side(self.object_edges_gripper, obj_kind, obj_index, n_object)

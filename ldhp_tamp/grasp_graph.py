@@ -40,7 +40,7 @@ import logging
 import math
 import time
 from collections import Counter, OrderedDict, defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
@@ -552,6 +552,27 @@ class GraspPlanner:
                                 verified=verified, recheck=recheck, rate=rate, free_at=ends)
         self._motion_sets[key] = (mg, n_cand)
         return mg, n_cand, True
+
+    def reject_carry(self, segment: Segment, grasp: int) -> bool:
+        """Take ``grasp`` out of ``segment``'s cached G_m: a judge downstream of this tier
+        (the plan's validation with the motion's contact modes and force limit, or the
+        physics simulation) found that carrying it along the segment does not execute.
+        Returns whether it was there (the next :meth:`plan` of the path avoids it)."""
+        key = _motion_key(segment)
+        hit = self._motion_sets.get(key)
+        if hit is None:
+            return False
+        mg, n_cand = hit
+        keep = mg.indices != grasp
+        if keep.all():
+            return False
+        rejected = np.concatenate([mg.rejected, [grasp]])
+        at = np.concatenate([mg.rejected_at, [0]])
+        order = np.argsort(rejected, kind="stable")
+        self._motion_sets[key] = (replace(mg, indices=mg.indices[keep], quality=mg.quality[keep],
+                                          force_closure=mg.force_closure[keep], alpha=mg.alpha[keep],
+                                          rejected=rejected[order], rejected_at=at[order]), n_cand)
+        return True
 
     def _motion_inputs(self, segment: Segment) -> tuple[IntArray, int, IntArray, IntArray, tuple[int, ...]]:
         """What :func:`motion_conditioned` is given for ``segment``: the candidates

@@ -22,7 +22,7 @@ import logging
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -64,6 +64,13 @@ class SolveOptions:
     """Wall-time budget of the whole solve in seconds (both tiers, every engine); when it
     runs out the solve fails with a reason starting ``timeout``. ``None``: no limit."""
     domain: Path | None = None  # a .pddl file used instead of the scenario's domain (ablate)
+    simulate: bool = False
+    """Judge every plan the bottom tier finds in the physics simulation too
+    (:mod:`ldhp_tamp.simulate`); a plan that diverges is treated like one that fails
+    validation: the diverging step's segment is the culprit."""
+    judge_retries: int = 6
+    """How often one pose path is planned again after a judge (validation, simulation)
+    refused its plan at a MoveObject step, without the grasp carried there."""
     helpers: bool = True
     """On a machine with more than one core, let a helper process (forked by the bottom
     tier with the grasp set) take half of the G_T and G_m computations and of the streams'
@@ -78,11 +85,13 @@ class _Clock:
     streams: float = 0.0
     grasp_graph: float = 0.0
     setup: float = 0.0
+    simulation: float = 0.0
     start: float = field(default_factory=time.perf_counter)
 
     def as_dict(self) -> dict[str, float]:
         return {"symbolic": round(self.symbolic, 4), "streams": round(self.streams, 4),
                 "grasp_graph": round(self.grasp_graph, 4), "setup": round(self.setup, 4),
+                **({"simulation": round(self.simulation, 4)} if self.simulation else {}),
                 "total": round(time.perf_counter() - self.start, 4)}
 
 
@@ -108,6 +117,7 @@ class _Counters:
     grasp_graph_edges: int = 0
     contact_state_nodes: int = 0
     pose_paths: int = 0
+    judge_rejections: int = 0
 
 
 def _stats(engine: str, c: _Counters, clock: _Clock) -> PlanStats:
@@ -115,7 +125,7 @@ def _stats(engine: str, c: _Counters, clock: _Clock) -> PlanStats:
                      grasp_graph_nodes=c.grasp_graph_nodes, grasp_graph_edges=c.grasp_graph_edges,
                      top_iterations=c.top_iterations, refinements=c.refinements,
                      feasibility_checks=c.feasibility_checks, time_s=clock.as_dict(),
-                     extra={"pose_paths": c.pose_paths})
+                     extra={"pose_paths": c.pose_paths, "judge_rejections": c.judge_rejections})
 
 
 def _failed(scenario: Scenario, engine: str, reason: str, c: _Counters, clock: _Clock) -> SolveResult:
@@ -164,7 +174,11 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                                   else settings.domain_path or settings.domain)
     check_against_domain(domain.info, REGISTRY)
     symbolic.check_engine(domain, engine)
+    # The planner plans with every coefficient scaled by (1 - friction_margin); its plans
+    # are validated (and simulated) with the scenario's own coefficients.
     world = scenario.world
+    if settings.friction_margin > 0:
+        world = replace(world, friction=world.friction.scaled(1.0 - settings.friction_margin))
     if scenario.start_grasp_any:
         return _failed(scenario, engine, "bottom tier: start_grasp = \"any\" (a held start whose grasp the "
                        "planner chooses) is not supported by this planner yet; give the start grasp as "
@@ -191,6 +205,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
 
     # the streams' sweeps, two at a time, with the bottom tier's helper once it has one
     ctx = replace(ctx, helper=grasp_planner.live_helper)
+    judge = _Judge(scenario, engine, options.simulate, c, clock)
     try:  # the helper process ends with the solve, however it ends
         forbidden: set[Transition | Sequel] = set()
         failures: list[str] = []
@@ -258,21 +273,12 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                 seen_paths.add(key)
                 tried += 1
                 c.pose_paths += 1
-                outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline)
+                outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline, judge)
                 if outcome.steps is not None:
-                    steps = outcome.steps
-                    plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, steps,
+                    plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, outcome.steps,
                                 _stats(engine, c, clock))
-                    report = validate_plan(plan, scenario)
-                    if report.valid:
-                        say(f"solved in {clock.as_dict()['total']:.2f} s")
-                        return SolveResult(SolveStatus.SOLVED, plan)
-                    msg = "; ".join(v.message for v in report.violations[:3])
-                    log.warning("the bottom tier's plan does not validate (%d violations: %s); "
-                                "treating it as a failure", len(report.violations), msg)
-                    failures.append(f"plan failed validation ({msg})")
-                    failed_step = None
-                    continue
+                    say(f"solved in {clock.as_dict()['total']:.2f} s")
+                    return SolveResult(SolveStatus.SOLVED, plan)
                 failures.append(outcome.reason)
                 seg = outcome.segment
                 failed_step = seg.step if seg is not None and 0 <= seg.step < len(planned) else None
@@ -355,6 +361,66 @@ def _culprits(planned: list[Transition], step: int, forbidden: set[Transition | 
 
 
 @dataclass(frozen=True)
+class Verdict:
+    """A judge's word on the plan steps of one grasp plan: ``step`` is the first plan step
+    that does not execute (``None``: the plan executes)."""
+
+    step: int | None = None
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.step is None
+
+
+class _Judge:
+    """Decides whether a grasp plan's steps make a plan that executes: the validator's
+    rules 0-9 on every output waypoint (the motion's contact modes, the force limit),
+    with the scenario's own friction; then, when asked, the physics simulation."""
+
+    def __init__(self, scenario: Scenario, engine: str, simulate: bool, c: _Counters, clock: _Clock):
+        self.scenario, self.engine, self.simulate, self.c, self.clock = scenario, engine, simulate, c, clock
+
+    def __call__(self, steps: tuple[Step, ...]) -> Verdict:
+        plan = Plan(FORMAT, self.scenario.name, self.scenario.sha256, PlanStatus.SOLVED, steps,
+                    _stats(self.engine, self.c, self.clock))
+        report = validate_plan(plan, self.scenario)
+        if not report.valid:
+            first = min((v for v in report.violations if v.step is not None), key=lambda v: v.step or 0,
+                        default=report.violations[0])
+            step = first.step if first.step is not None else 0
+            self.c.judge_rejections += 1
+            log.info("the bottom tier's plan does not validate (%d violations; first at step %d (%s): %s)",
+                     len(report.violations), step, steps[step].primitive, first.message)
+            return Verdict(step, f"the plan breaks rule {first.rule} at step {step} ({steps[step].primitive}): "
+                                 f"{first.message}")
+        if not self.simulate:
+            return Verdict()
+        from ldhp_tamp.simulate import simulate_plan  # MuJoCo loads only when asked for
+
+        t0 = time.perf_counter()
+        sim = simulate_plan(plan, self.scenario)
+        self.clock.simulation += time.perf_counter() - t0
+        if sim.executes:
+            return Verdict()
+        step = sim.diverged_step if sim.diverged_step is not None else len(steps) - 1
+        self.c.judge_rejections += 1
+        log.info("the plan diverges in simulation at step %d (%s): %s", step, steps[step].primitive, sim.reason)
+        return Verdict(step, f"the plan diverges in simulation at step {step} ({steps[step].primitive}): {sim.reason}")
+
+
+def _segment_of_step(steps: Sequence[Step], step: int) -> tuple[int, bool]:
+    """The pose-path segment that plan step ``step`` belongs to (MoveObject steps are the
+    segments in order; an AdjustGrasp step belongs to the next MoveObject step, or the
+    last one), and whether the step is that segment's MoveObject step."""
+    moves = [i for i, st in enumerate(steps) if st.family is Family.MOVE_OBJECT]
+    after = [k for k, i in enumerate(moves) if i >= step]
+    if not after:
+        return max(len(moves) - 1, 0), False
+    return after[0], moves[after[0]] == step
+
+
+@dataclass(frozen=True)
 class _BottomOutcome:
     """The bottom tier's answer for one pose path: the plan steps, or the segment to
     blame and why."""
@@ -365,13 +431,21 @@ class _BottomOutcome:
 
 
 def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters,
-                 clock: _Clock, deadline: float | None = None) -> _BottomOutcome:
-    """Grasp planning with dichotomy refinement (Algorithm 1's inner loop)."""
+                 clock: _Clock, deadline: float | None = None,
+                 judge: Callable[[tuple[Step, ...]], Verdict] | None = None,
+                 retries: int = SolveOptions.judge_retries) -> _BottomOutcome:
+    """Grasp planning with dichotomy refinement (Algorithm 1's inner loop).
+
+    A solved grasp plan is handed to ``judge``; when it refuses the plan at the
+    MoveObject step of segment k, the grasp carried there leaves that segment's G_m and
+    the path is planned again (at most ``retries`` times); a refusal elsewhere (or once
+    the retries are spent) fails the path at that segment."""
     segments = list(path.segments)
     if not segments:  # nothing for a grasp to be carried along
         return _BottomOutcome(reason="bottom tier: the object need not move (its start pose is the goal "
                                      "pose), and plans of AdjustGrasp steps alone are not searched")
     refinements = 0
+    rejected = 0
     while True:
         t0 = time.perf_counter()
         try:
@@ -382,7 +456,17 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         c.grasp_graph_nodes = res.nodes
         c.grasp_graph_edges = res.edges
         if res.status is GraspPlanStatus.SOLVED:
-            return _BottomOutcome(steps=tuple(res.steps))
+            steps = tuple(res.steps)
+            verdict = Verdict() if judge is None else judge(steps)
+            if verdict.ok:
+                return _BottomOutcome(steps=steps)
+            assert verdict.step is not None
+            k, carried = _segment_of_step(steps, verdict.step)
+            if carried and rejected < retries and planner.reject_carry(segments[k], res.grasps[k]):
+                rejected += 1
+                log.info("grasp %d no longer carries segment %d; planning the path again", res.grasps[k], k)
+                continue
+            return _BottomOutcome(segment=segments[k], reason=f"bottom tier: {verdict.reason}")
         k = res.failing_segment
         k = k if k is not None and 0 <= k < len(segments) else len(segments) - 1
         seg = segments[k]

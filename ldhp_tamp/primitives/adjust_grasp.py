@@ -919,10 +919,17 @@ def sample_motion(context: AdjustContext, motion: GripperMotion) -> MotionSample
         ry = sa[:, None] * normal[..., 0] + ca[:, None] * normal[..., 1]
         normal = np.where(turn[..., None], np.stack([rx, ry], -1), normal)
     mu = m.mu[e_idx, l_idx].copy()
-    mode = np.where(role == FingerRole.SLIDING, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING)
-    shn = np.linalg.norm(sh, axis=1)
-    slide_dir = np.where(shn[:, None] > EPS, -sh / np.maximum(shn, EPS)[:, None], 0.0)
-    slide = np.where((role == FingerRole.SLIDING)[..., None], slide_dir[:, None, :], 0.0)
+    # A SLIDING finger's material point at its contact p moves (per unit of the leg's
+    # parameter) by v = shift + angle * J (p - centre - s * shift), J the quarter turn:
+    # the object slides relative to the finger along -v (a slide: -shift; a round
+    # finger turning about its centre: -angle * J * radius * n, its surface slipping).
+    rel = point - (c + s[:, None] * sh)[:, None, :]
+    ang = m.angle[e_idx, l_idx][:, None]
+    v = sh[:, None, :] + ang[..., None] * np.stack([-rel[..., 1], rel[..., 0]], axis=-1)
+    vn = np.linalg.norm(v, axis=-1)
+    sliding = (role == FingerRole.SLIDING) & (vn > EPS)
+    mode = np.where(sliding, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING)
+    slide = np.where(sliding[..., None], -v / np.maximum(vn, EPS)[..., None], 0.0)
 
     # The ends follow the grasps.
     for mask, rows in ((first, m.src[e_idx]), (last, m.dst[e_idx])):
@@ -936,8 +943,14 @@ def sample_motion(context: AdjustContext, motion: GripperMotion) -> MotionSample
         point[idx] = np.nan_to_num(gs.contact[g])
         normal[idx] = np.nan_to_num(gs.normal[g])
         mu[idx] = ctx.mu[g]
-        mode[idx] = mechanics.ContactMode.STICKING
-        slide[idx] = 0.0
+        # An edge's ends are checked with the contact modes of its motion too (plan rule
+        # 8): a finger that slides over the edge slides at its first and last sample, so
+        # a slide of any length has sliding samples (between them, support holds too: a
+        # single contact moving along a straight edge with a fixed force direction keeps
+        # the feasible set connected, see docs/design/grasp_graph.md).
+        keep = sliding[idx] & gs.touching[g]
+        mode[idx] = np.where(keep, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING)
+        slide[idx] = np.where(keep[..., None], slide[idx], 0.0)
     free = (role == FingerRole.FREE) & ~(first | last)[:, None]
     point = np.where(declared[..., None], point, 0.0)
     normal = np.where(declared[..., None], normal, 0.0)
@@ -1406,7 +1419,11 @@ class Pivot(_AdjustGrasp):
         ang = np.where(delta * edges.sense > 0, delta, delta + edges.sense * 2.0 * np.pi)
         leg = _rotation(gs.gripper[a], _pivot_centre(context, a, k), ang, gs.width[a])
         turn = context.is_polyline & (gs.feature[a, k] >= gs.n_object) & (gs.part[a, k] == FingerPart.PAD)
-        _keep_finger(context, leg, a, k, FingerRole.FIXED, np.asarray(turn, dtype=bool).reshape(-1))
+        # A pad or fingertip corner turns about its contact point: it sticks. A round
+        # finger turns about its centre: its surface slips over the contact by radius x
+        # turn, so the contact is SLIDING (sample_motion derives the direction).
+        role = FingerRole.FIXED if context.is_polyline else FingerRole.SLIDING
+        _keep_finger(context, leg, a, k, role, np.asarray(turn, dtype=bool).reshape(-1))
         return _assemble(a, b, [leg])
 
     def parameters(self, context: AdjustContext, edges: IntraEdges, index: int = 0) -> dict[str, Any]:

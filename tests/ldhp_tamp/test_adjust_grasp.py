@@ -14,6 +14,7 @@ import math
 import numpy as np
 import pytest
 
+from geometry import mechanics
 from geometry.grasps import GraspOptions, enumerate_grasps, pose_conditioned
 from geometry.poses import Pose
 from ldhp_tamp.errors import InputError
@@ -381,3 +382,46 @@ def test_pivot_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(scen
     assert want[0].size > 20
     for x, y in zip(got, want):
         np.testing.assert_array_equal(x, y)
+
+
+def test_every_sample_of_a_slide_is_checked_sliding_even_a_short_one(poly: Case):
+    gs = poly.grasps
+    slide = ag.Slide().propose(poly.ctx, T0, poly.gt, np.isin(np.arange(len(gs)), poly.gt))
+    short = np.flatnonzero(slide.travel <= 4.0)
+    assert short.size
+    motion = ag.Slide().motion(poly.ctx, T0, slide.take(short[:20]))
+    smp = ag.sample_motion(poly.ctx, motion)
+    k = slide.finger[short[:20]][smp.edge]
+    mode = smp.mode[np.arange(len(smp)), k]
+    # the sliding finger slides at every sample, the edge's first and last included
+    assert (mode == mechanics.ContactMode.SLIDING).all()
+    assert smp.first.any() and smp.last.any()
+    # the object slides relative to the finger against the finger's travel
+    travel = gs.gripper[motion.dst, :2] - gs.gripper[motion.src, :2]
+    slide_dir = smp.slide[np.arange(len(smp)), k]
+    assert (np.einsum("ij,ij->i", slide_dir, travel[smp.edge]) < 0).all()
+
+
+def test_a_round_finger_pivoting_about_its_centre_slips(two_point: Case):
+    gs = two_point.grasps
+    members = np.isin(np.arange(len(gs)), two_point.gt)
+    pivot = ag.Pivot().propose(two_point.ctx, T0, two_point.gt, members)
+    assert len(pivot)
+    take = pivot.take(np.arange(min(20, len(pivot))))
+    smp = ag.sample_motion(two_point.ctx, ag.Pivot().motion(two_point.ctx, T0, take))
+    k = take.finger[smp.edge]
+    mode = smp.mode[np.arange(len(smp)), k]
+    assert (mode == mechanics.ContactMode.SLIDING).all()
+    # the slip is tangential: perpendicular to the contact normal
+    n = smp.normal[np.arange(len(smp)), k]
+    s = smp.slide[np.arange(len(smp)), k]
+    assert np.allclose(np.einsum("ij,ij->i", n, s), 0.0, atol=1e-9)
+
+
+def test_a_pad_pivoting_about_its_contact_point_sticks(poly: Case):
+    gs = poly.grasps
+    pivot = ag.Pivot().propose(poly.ctx, T0, poly.gt, np.isin(np.arange(len(gs)), poly.gt))
+    take = pivot.take(np.arange(min(20, len(pivot))))
+    smp = ag.sample_motion(poly.ctx, ag.Pivot().motion(poly.ctx, T0, take))
+    k = take.finger[smp.edge]
+    assert (smp.mode[np.arange(len(smp)), k] == mechanics.ContactMode.STICKING).all()
