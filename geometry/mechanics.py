@@ -1134,8 +1134,205 @@ def grasp_quality(
     return GraspQuality(w1 * s + w2 * alpha, closure, s, alpha, admissible)
 
 
+
+# --------------------------------------------------------------------------------------
+# Forces under a finger force limit (batched LP)
+# --------------------------------------------------------------------------------------
+
+#: Instances per block-diagonal LP of :func:`bounded_support`.
+_LP_CHUNK: int = 256
+
+
+@dataclass(frozen=True, eq=False)
+class BoundedSupport:
+    """Result of :func:`bounded_support`: equilibria under a finger force limit.
+
+    Attributes
+    ----------
+    feasible : ndarray of bool, shape (B,)
+        The cone test passes and some equilibrium has every finger's normal force at
+        most ``max_force``.
+    equilibrium : ndarray of bool, shape (B,)
+        The LP found an equilibrium (force limit aside): the forces below are defined.
+    forces : ndarray, shape (B, C, 2)
+        Per contact, the force on the object as ``[normal, tangential]`` in newtons:
+        along the contact's normal ``n`` (into the object) and along its tangent
+        ``t = (-n_y, n_x)``; zero for absent contacts, ``nan`` where no equilibrium.
+    finger_forces : ndarray, shape (B, F, 2)
+        Per finger, the sum over its contacts of ``[normal, tangential]`` in the plan
+        spec's convention (``finger_forces`` of ``ldhp-plan/1``): the normal component
+        pushes into the object, the tangential one is along the object edge's
+        counter-clockwise direction, i.e. along ``-t`` for an inward edge normal ``n``;
+        zero for a finger without contact, ``nan`` where no equilibrium.
+    max_finger_force : ndarray, shape (B,)
+        The largest finger normal force (N) of that equilibrium, the least possible over
+        all equilibria (the LP's objective); 0 without finger contact, ``nan`` where no
+        equilibrium.
+    """
+
+    feasible: BoolArray
+    equilibrium: BoolArray
+    forces: FloatArray
+    finger_forces: FloatArray
+    max_finger_force: FloatArray
+
+
+def _lp_block(G: FloatArray, A: FloatArray, ub: FloatArray) -> FloatArray | None:
+    """Solve ``min sum_b t_b : G_b lam_b = e_y, A_b lam_b <= t_b, 0 <= lam_b <= ub_b``
+    for a chunk at once (the instances decouple: one block-diagonal LP). ``G`` is
+    (b, 3, K), ``A`` (b, F, K) and ``ub`` (b, K). Returns ``lam`` (b, K) or ``None``
+    when HiGHS does not report an optimum."""
+    import scipy.sparse as sp
+    from scipy.optimize import linprog
+
+    b, _, K = G.shape
+    F = A.shape[1]
+    nv = K + 1
+    base = (np.arange(b) * nv)[:, None, None]
+    cols = base + np.arange(K)[None, None, :]
+    eq = sp.coo_array((G.reshape(-1), ((np.arange(b)[:, None, None] * 3 + np.arange(3)[None, :, None])
+                                       .repeat(K, axis=2).reshape(-1), np.broadcast_to(cols, G.shape).reshape(-1))),
+                      shape=(3 * b, nv * b))
+    rows_ub = (np.arange(b)[:, None] * F + np.arange(F)[None, :])  # (b, F)
+    ub_vals = np.concatenate([A, -np.ones((b, F, 1))], axis=2)  # (b, F, K+1)
+    ub_cols = np.broadcast_to((np.arange(b) * nv)[:, None, None] + np.arange(nv)[None, None, :], ub_vals.shape)
+    ub_rows = np.broadcast_to(rows_ub[..., None], ub_vals.shape)
+    ineq = sp.coo_array((ub_vals.reshape(-1), (ub_rows.reshape(-1), ub_cols.reshape(-1))), shape=(F * b, nv * b))
+    c = np.zeros((b, nv))
+    c[:, K] = 1.0
+    bounds = np.zeros((b, nv, 2))
+    bounds[:, :K, 1] = ub
+    bounds[:, K, 1] = np.inf
+    res = linprog(c.reshape(-1), A_ub=ineq.tocsr() if F else None, b_ub=np.zeros(F * b) if F else None,
+                  A_eq=eq.tocsr(), b_eq=np.tile(_EY, b), bounds=bounds.reshape(-1, 2), method="highs",
+                  options={"primal_feasibility_tolerance": 0.1 * FEASIBILITY_MARGIN,
+                           "dual_feasibility_tolerance": 0.1 * FEASIBILITY_MARGIN})
+    if res.status != 0 or res.x is None:
+        return None
+    return np.asarray(res.x, dtype=float).reshape(b, nv)[:, :K]
+
+
+def bounded_support(
+    contacts: Contacts,
+    com: ArrayLike,
+    length_scale: float | ArrayLike,
+    weight: float,
+    finger_of: ArrayLike,
+    max_force: float | None = None,
+    margin: float = FEASIBILITY_MARGIN,
+    fingers: int = 2,
+) -> BoundedSupport:
+    """Quasi-static support with every finger's normal force bounded, and its forces.
+
+    First the cone test (:func:`feasible_batch` with ``margin``): instances it refuses
+    stay refused. On the others, one linear program per instance (solved a chunk at a
+    time by HiGHS, ``scipy.optimize.linprog``, as one block-diagonal LP):
+
+        min t   s.t.   sum_k lam_k g_k = e_y,   lam >= 0,
+                       sum_{k of finger f} (d_k . n_k) lam_k <= t   (every finger f)
+
+    over the mode-dependent generators ``g_k`` of :func:`wrench_generators` (two per
+    STICKING/ROLLING contact, one per SLIDING one; ``d_k`` the generator's unit force,
+    ``n_k`` its contact's normal), in normalised units (forces / ``weight``). ``t``
+    is the least possible largest finger normal force; the instance is feasible iff
+    ``t * weight <= max_force`` within :data:`FEASIBILITY_MARGIN` (normalised, like the
+    equilibrium residual the LP solution is verified to). The LP's solution is also the
+    force solution returned (a vertex: forces often lie on cone edges).
+
+    Parameters
+    ----------
+    contacts : Contacts
+        (B, C) contacts with their modes.
+    com : array_like, shape (2,) or (B, 2)
+    length_scale : float or array_like, shape (B,)
+    weight : float
+        ``m g`` (N).
+    finger_of : array_like of int, broadcastable to (B, C)
+        The finger (``0 .. fingers-1``) each contact belongs to, ``-1`` for an
+        environment contact.
+    max_force : float or None
+        The limit (N) on each finger's total normal force; ``None`` or ``inf``: none
+        (the forces are still computed).
+    margin : float
+        The cone test's margin (0 for closed cones, as the plan validator uses).
+    fingers : int
+        ``F``, the number of fingers in ``finger_forces``.
+
+    Returns
+    -------
+    BoundedSupport
+
+    Examples
+    --------
+    A 1 kg block pinched at its ends by two fingers with mu = 0.5: each finger must
+    press with at least W / (2 mu) = 9.81 N.
+
+    >>> pinch = Contacts.make([[-1.0, 0.0], [1.0, 0.0]], [[1.0, 0.0], [-1.0, 0.0]], 0.5)
+    >>> r = bounded_support(pinch, [0.0, 0.0], 1.0, weight=9.81, finger_of=[0, 1], max_force=10.0)
+    >>> bool(r.feasible[0]), round(float(r.max_finger_force[0]), 6)
+    (True, 9.81)
+    >>> np.round(r.finger_forces[0], 6).tolist()   # [normal, tangential (counter-clockwise)] per finger
+    [[9.81, -4.905], [9.81, 4.905]]
+    >>> bool(bounded_support(pinch, [0.0, 0.0], 1.0, 9.81, [0, 1], max_force=9.0).feasible[0])
+    False
+    """
+    c, il = _check_contacts_frame(contacts, com, length_scale)
+    B, C = contacts.batch, contacts.count
+    if not (math.isfinite(weight) and weight > 0):
+        raise GeometryError(f"weight must be a positive number of newtons, got {weight}")
+    limit = math.inf if max_force is None else float(max_force)
+    if not limit > 0:
+        raise GeometryError(f"max_force must be positive, got {max_force}")
+    fo = np.broadcast_to(np.asarray(finger_of, dtype=np.int64), (B, C))
+    if fo.size and (fo.min() < -1 or fo.max() >= fingers):
+        raise GeometryError(f"finger_of must lie in -1 .. {fingers - 1}")
+    cone = _feasible_impl(contacts, c, il, np.array([margin], dtype=float)) if C else np.zeros(B, bool)
+    lam = np.full((B, 2 * C), np.nan)
+    todo = np.flatnonzero(cone)
+    if todo.size:
+        sub = contacts.select(todo)
+        gens, _ = wrench_generators(sub, c if c.shape[0] == 1 else c[todo], 1.0 / (il if il.shape[0] == 1 else il[todo]))
+        G = np.swapaxes(gens, 1, 2)  # (b, 3, K)
+        n_k = np.repeat(sub.normals, 2, axis=1)  # (b, K, 2)
+        a = gens[..., 0] * n_k[..., 0] + gens[..., 1] * n_k[..., 1]  # normal part of each unit generator
+        owner = np.repeat(fo[todo], 2, axis=1)  # (b, K)
+        A = np.where(owner[:, None, :] == np.arange(fingers)[None, :, None], a[:, None, :], 0.0)
+        ub = np.where(np.abs(gens).sum(axis=2) > 0, np.inf, 0.0)
+        for s in range(0, todo.size, _LP_CHUNK):
+            sl = slice(s, min(s + _LP_CHUNK, todo.size))
+            x = _lp_block(G[sl], A[sl], ub[sl])
+            if x is None:  # one troublesome instance must not spoil the chunk
+                logger.debug("bounded_support: chunk LP not optimal, solving its %d instances one by one",
+                             sl.stop - sl.start)
+                x = np.full((sl.stop - sl.start, G.shape[2]), np.nan)
+                for j in range(sl.stop - sl.start):
+                    one = _lp_block(G[sl][j:j + 1], A[sl][j:j + 1], ub[sl][j:j + 1])
+                    if one is not None:
+                        x[j] = one[0]
+            x = np.maximum(x, 0.0)
+            residual = np.abs(np.einsum("bik,bk->bi", G[sl], x) - _EY).max(axis=1)
+            x[~(residual <= FEASIBILITY_MARGIN)] = np.nan
+            lam[todo[sl]] = x
+    equilibrium = np.isfinite(lam).all(axis=1) & cone
+    gens_all, _ = wrench_generators(contacts, c, 1.0 / il) if C else (np.zeros((B, 0, 3)), None)
+    f_world = weight * (np.nan_to_num(lam)[..., None] * gens_all[..., :2]).reshape(B, C, 2, 2).sum(axis=2)  # (B, C, 2)
+    n, t = contacts.normals, np.stack([-contacts.normals[..., 1], contacts.normals[..., 0]], axis=-1)
+    fn = (f_world * n).sum(axis=-1)
+    ft = (f_world * t).sum(axis=-1)
+    forces = np.stack([fn, ft], axis=-1)
+    mine = fo[..., None] == np.arange(fingers)  # (B, C, F)
+    finger_forces = np.stack([np.einsum("bc,bcf->bf", fn, mine), np.einsum("bc,bcf->bf", -ft, mine)], axis=-1)
+    largest = finger_forces[..., 0].max(axis=1, initial=0.0)
+    forces[~equilibrium] = np.nan
+    finger_forces[~equilibrium] = np.nan
+    largest[~equilibrium] = np.nan
+    feasible = equilibrium & (largest <= limit + FEASIBILITY_MARGIN * weight)
+    return BoundedSupport(_frozen(feasible, bool), _frozen(equilibrium, bool), _frozen(forces, float),
+                          _frozen(finger_forces, float), _frozen(largest, float))
+
 __all__: list[str] = [
     "MARGIN_CAP",
+    "BoundedSupport",
     "MU_ZERO",
     "ContactMode",
     "ContactModes",
@@ -1144,6 +1341,7 @@ __all__: list[str] = [
     "GraspQuality",
     "ModeTolerances",
     "ReferenceResult",
+    "bounded_support",
     "classify_contacts",
     "cone_contains",
     "feasible_batch",
