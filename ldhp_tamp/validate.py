@@ -42,23 +42,28 @@ from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
 from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import MAX_WAYPOINT_STEP, VALIDATE_TOL, VALIDATE_TOL_DEG
 from geometry.world import Environment, PolylineGripper, TwoPointGripper, World
+from ldhp_tamp.domain_info import DomainActions, read_domain_actions
+from ldhp_tamp.errors import DomainError
 from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStatus
-from ldhp_tamp.scenario import Scenario
+from ldhp_tamp.scenario import Scenario, find_domain
 
-__all__ = ["RULES", "ValidationReport", "Violation", "format_violation", "validate_plan"]
+__all__ = ["RULES", "SLIP_TOL", "ValidationReport", "Violation", "domain_actions", "format_violation", "validate_plan"]
 
 log = logging.getLogger(__name__)
 
 
 #: Short names of the spec's rules, by number.
 RULES: dict[int, str] = {
+    0: "known primitives",
     1: "ends",
-    2: "continuity",
+    2: "continuity and width",
     3: "no penetration",
     4: "real finger contacts",
     5: "move-object keeps the grasp",
     6: "adjust-grasp keeps the object still",
     7: "quasi-static support",
+    8: "support with the motion's contact modes",
+    9: "finger force limit",
 }
 
 #: Slack (mm, or radians) for numbers that went through a file rounded to 6 decimals
@@ -78,7 +83,7 @@ class Violation:
     Attributes
     ----------
     rule : int
-        The spec's rule number, 1..7.
+        The spec's rule number, 0..9.
     step : int or None
         0-based step index (``steps[i]`` in the file); ``None`` for the plan as a whole.
     waypoint : int or None
@@ -105,7 +110,8 @@ class ValidationReport:
     """The verdict on a plan: valid iff no violation. Warnings do not count.
 
     The counts say what was checked: steps and waypoints, declared finger contacts
-    (rule 4) and quasi-static support tests (rule 7).
+    (rule 4), quasi-static support tests (rule 7, with rule 8 at the waypoints where a
+    contact slips) and the waypoints whose finger forces the LP bounded (rule 9).
     """
 
     valid: bool
@@ -115,6 +121,7 @@ class ValidationReport:
     waypoints_checked: int = 0
     contacts_checked: int = 0
     support_checks: int = 0
+    force_checks: int = 0
 
     def __post_init__(self) -> None:
         if self.valid != (not self.violations):
@@ -330,6 +337,7 @@ class _Contacts:
     mu: FloatArray  # (B, C)
     on: BoolArray  # (B, C)
     labels: tuple[str, ...]  # (C,) the contact each candidate belongs to
+    finger: IntArray  # (C,) the finger (0, 1) of a finger candidate, -1 for the environment
 
 
 def _contacts(world: World, flat: _Flat) -> _Contacts:
@@ -347,15 +355,16 @@ def _contacts(world: World, flat: _Flat) -> _Contacts:
     obj, env, fr = world.object, world.environment, world.friction
     poly = obj.polygon
     n, m, b = len(poly), env.m, len(flat)
-    pts, nrm, mus, ons, labels = [], [], [], [], []
+    pts, nrm, mus, ons, labels, owner = [], [], [], [], [], []
 
-    def add(p: FloatArray, nv: FloatArray, mu: FloatArray, on: BoolArray, names: list[str]) -> None:
+    def add(p: FloatArray, nv: FloatArray, mu: FloatArray, on: BoolArray, names: list[str], finger: int = -1) -> None:
         c = on.shape[1]
         pts.append(np.broadcast_to(p, (b, c, 2)))
         nrm.append(np.broadcast_to(nv, (b, c, 2)))
         mus.append(np.broadcast_to(mu, (b, c)))
         ons.append(on)
         labels.extend(names)
+        owner.extend([finger] * c)
 
     # Object vertices on environment edges.
     verts = transform_points(flat.obj, poly.vertices)  # (B, N, 2)
@@ -392,48 +401,161 @@ def _contacts(world: World, flat: _Flat) -> _Contacts:
             fallback = dec & ~on_edge.any(axis=1) & ~on_finger.any(axis=1)
             on_edge |= fallback[:, None] & (np.arange(n) == nearest_edge[:, k][:, None])
             label = f"finger {k + 1}"
-            add(p[:, k, None, :], inward, mu_l, on_edge, [label] * n)
+            add(p[:, k, None, :], inward, mu_l, on_edge, [label] * n, k)
             e = on_finger.shape[1]
             add(p[:, k, None, :], fb.normals[:, k], mu_v[nearest_vertex[:, k]][:, None] * np.ones(e),
-                on_finger, [label] * e)
+                on_finger, [label] * e, k)
 
     return _Contacts(np.concatenate(pts, 1), np.concatenate(nrm, 1), np.concatenate(mus, 1),
-                     np.concatenate(ons, 1), tuple(labels))
+                     np.concatenate(ons, 1), tuple(labels), np.array(owner, dtype=np.int64))
 
 
-#: Waypoints per block of rule 7 (bounds the memory for large environments).
+#: Waypoints per block of rules 7-9 (bounds the memory for large environments).
 _BLOCK = 1024
 
+#: Rule 8: a contact whose two bodies' material points drift apart tangentially by more
+#: than this (mm) over the motion to the next waypoint is sliding.
+SLIP_TOL = 0.1
 
-def _support(world: World, flat: _Flat) -> BoolArray:
-    """Rule 7 at every waypoint: whether the contacts present can carry the weight.
 
-    Every contact candidate is a STICKING contact (full cone) of
-    :func:`geometry.mechanics.feasible_batch` with margin 0: closed cone membership, so
-    contacts that must carry no force do not spoil an equilibrium.
+@dataclass(frozen=True, eq=False)
+class _Motion:
+    """The contact modes of the motion from each waypoint to the next (rule 8), per
+    contact candidate of :class:`_Contacts`."""
+
+    sliding: BoolArray  # (B, C) present and drifting more than SLIP_TOL tangentially
+    slide_dirs: FloatArray  # (B, C, 2) the object's tangential slip direction where sliding
+    drift: FloatArray  # (B, C) tangential drift along t = (-n_y, n_x) (mm, object relative to the other body)
+
+
+def _motion(world: World, flat: _Flat, rows: IntArray, c: _Contacts) -> _Motion:
+    """Rule 8's contact modes at waypoints ``rows`` (global indices) of the contacts
+    ``c`` present there, for the motion to the next waypoint (none after the last).
+
+    The object's material point at a contact point p is p carried by the object's rigid
+    motion; a finger's is p carried by the gripper's rigid motion plus that finger's own
+    shift by the width change (finger 1 by -dw/2, finger 2 by +dw/2 along the gripper's
+    x axis); an environment solid's stays at p. The drift is the object's material point
+    relative to the other body's, along the candidate's tangent.
     """
-    ok = np.zeros(len(flat), dtype=bool)
+    nxt = np.minimum(rows + 1, len(flat) - 1)
+    has_next = rows + 1 < len(flat)
+    d = mechanics.pose_displacements(c.points, flat.obj[rows], flat.obj[nxt])[0]  # (B, C, 2)
+    if (c.finger >= 0).any():
+        dg = mechanics.pose_displacements(c.points, flat.grip[rows], flat.grip[nxt])[0]
+        shift = _rotate(flat.grip[nxt], _finger_offsets(flat.width[nxt] - flat.width[rows]))  # (B, 2, 2)
+        finger = c.finger >= 0
+        d = d - np.where(finger[None, :, None], dg + shift[:, np.clip(c.finger, 0, 1), :], 0.0)
+    t = np.stack([-c.normals[..., 1], c.normals[..., 0]], axis=-1)
+    drift = (d * t).sum(axis=-1)
+    modes = mechanics.classify_contacts(
+        c.normals, drift[..., None] * t, 0.0, world.object.length_scale,
+        mechanics.ModeTolerances(relative=0.0, absolute=SLIP_TOL + ROUNDING_SLACK),
+        present=c.on & has_next[:, None])
+    return _Motion(modes.codes == mechanics.ContactMode.SLIDING, np.asarray(modes.slide_dirs), drift)
+
+
+@dataclass(frozen=True, eq=False)
+class _Support:
+    """Rules 7-9 at every waypoint."""
+
+    rule7: BoolArray  # (W,) full cones balance the weight
+    rule8: BoolArray  # (W,) the motion's contact modes balance it (= rule7 where nothing slides)
+    rule9: BoolArray  # (W,) ... with every finger's normal force within max_force (True without one)
+    force: FloatArray  # (W,) least largest finger normal force (N) where the LP ran, else nan
+    force_checks: int  # waypoints that needed the LP
+
+
+def _support(world: World, flat: _Flat, max_force: float | None = None) -> _Support:
+    """Rules 7, 8 and 9 at every waypoint.
+
+    Rule 7: every contact candidate is a STICKING contact (full cone) of
+    :func:`geometry.mechanics.feasible_batch` with margin 0: closed cone membership, so
+    contacts that must carry no force do not spoil an equilibrium. Rule 8: the same with
+    the contacts that slip over the motion to the next waypoint SLIDING (tested only
+    where some contact slips and rule 7 holds). Rule 9 (with ``max_force``): the batched
+    LP :func:`geometry.mechanics.bounded_support` with rule 8's modes, where rule 8 holds
+    and a finger touches.
+    """
+    n_wp = len(flat)
+    ok7 = np.zeros(n_wp, dtype=bool)
+    ok8 = np.zeros(n_wp, dtype=bool)
+    ok9 = np.ones(n_wp, dtype=bool)
+    force = np.full(n_wp, np.nan)
+    lps = 0
     com = transform_points(flat.obj, world.object.com)[:, 0]  # (B, 2)
     scale = world.object.length_scale
-    for start in range(0, len(flat), _BLOCK):
-        block = slice(start, min(start + _BLOCK, len(flat)))
+    for start in range(0, n_wp, _BLOCK):
+        block = slice(start, min(start + _BLOCK, n_wp))
         c = _contacts(world, flat.take(block))
+        mo = _motion(world, flat, np.arange(block.start, block.stop), c)
         count = c.on.sum(axis=1)
         for kc in np.unique(count[count > 0]):
             rows = np.flatnonzero(count == kc)
             cols = np.argsort(~c.on[rows], axis=1, kind="stable")[:, :kc]  # the candidates present
-            contacts = mechanics.Contacts.make(
-                np.take_along_axis(c.points[rows], cols[..., None], axis=1),
-                np.take_along_axis(c.normals[rows], cols[..., None], axis=1),
-                np.take_along_axis(c.mu[rows], cols, axis=1),
-            )
-            ok[start + rows] = mechanics.feasible_batch(contacts, com[block][rows], scale, margin=0.0)
-    return ok
+
+            def take(a: np.ndarray, rows: IntArray = rows, cols: IntArray = cols) -> np.ndarray:
+                return np.take_along_axis(a[rows], cols[..., None] if a.ndim == 3 else cols, axis=1)
+
+            points, normals, mu, sliding = take(c.points), take(c.normals), take(c.mu), take(mo.sliding)
+            com_r = com[block][rows]
+            g = start + rows
+            ok7[g] = mechanics.feasible_batch(mechanics.Contacts.make(points, normals, mu), com_r, scale, margin=0.0)
+            ok8[g] = ok7[g]
+            modes = np.where(sliding, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING).astype(np.int8)
+            moving = mechanics.Contacts.make(points, normals, mu, modes, take(mo.slide_dirs))
+            slips = ok7[g] & sliding.any(axis=1)
+            if slips.any():
+                ok8[g[slips]] = mechanics.feasible_batch(moving.select(slips), com_r[slips], scale, margin=0.0)
+            if max_force is None:
+                continue
+            fingers = c.finger[cols]  # (r, kc)
+            need = ok8[g] & (fingers >= 0).any(axis=1)
+            if need.any():
+                r = mechanics.bounded_support(moving.select(need), com_r[need], scale, world.object.weight,
+                                              fingers[need], max_force, margin=0.0)
+                ok9[g[need]] = r.feasible
+                force[g[need]] = r.max_finger_force
+                lps += int(need.sum())
+    return _Support(ok7, ok8, ok9, force, lps)
 
 
 # --------------------------------------------------------------------------------------
 # The rules
 # --------------------------------------------------------------------------------------
+
+
+def domain_actions(scenario: Scenario) -> DomainActions:
+    """The actions and families of the domain ``scenario`` names (rule 0).
+
+    ``settings.domain_path`` when the loader resolved it, else ``settings.domain``
+    resolved by :func:`ldhp_tamp.scenario.find_domain` against the scenario file's folder.
+
+    Raises
+    ------
+    DomainError
+        The domain cannot be found or read (bad input, not a broken rule).
+    """
+    s = scenario.settings
+    path = s.domain_path
+    if path is None:
+        path = find_domain(s.domain, scenario.path.parent if scenario.path is not None else None)
+    if path is None:
+        raise DomainError(f"{scenario.path or scenario.name}: planner.domain: unknown domain {s.domain!r}: "
+                          "the plan's primitives cannot be checked (rule 0)")
+    return read_domain_actions(path)
+
+
+def _rule0(plan: Plan, domain: DomainActions, out: _Findings) -> None:
+    where = f"domain {domain.name!r} ({domain.source})"
+    for s, step in enumerate(plan.steps):
+        family = domain.family(step.primitive)
+        if family is None:
+            out.add(0, s, None, f"primitive {step.primitive!r} is not an action of {where}; its actions: "
+                    + ", ".join(domain.names()))
+        elif family is not step.family:
+            out.add(0, s, None, f"family is {step.family.value!r}, but {step.primitive!r} is a "
+                    f"{family.value} action of {where}")
 
 
 def _rule1(plan: Plan, scenario: Scenario, flat: _Flat, out: _Findings) -> None:
@@ -510,6 +632,11 @@ def _rule2(world: World, flat: _Flat, out: _Findings) -> None:
         verb = "changes" if name == "width" else "moves"
         out.flag(2, d > _STEP, lambda i, d=d, name=name, verb=verb:
                  f"{name} {verb} {_mm(d[i])} since the previous waypoint (limit {_mm(MAX_WAYPOINT_STEP)})", d)
+    lo, hi = world.gripper.width_range
+    outside = np.maximum(lo - flat.width, flat.width - hi)
+    word = "spacing" if isinstance(world.gripper, TwoPointGripper) else "opening"
+    out.flag(2, outside > _TOL, lambda i: f"width {flat.width[i]:.2f} mm is outside the gripper's {word} "
+             f"[{lo:g}, {hi:g}] mm (tolerance {_mm(VALIDATE_TOL)})", outside)
 
 
 def _rule3(world: World, flat: _Flat, out: _Findings) -> None:
@@ -588,14 +715,44 @@ def _rule6(plan: Plan, flat: _Flat, out: _Findings) -> None:
                  f"step's first waypoint (tolerance {_mm(VALIDATE_TOL)}, {VALIDATE_TOL_DEG:g} deg)", severity)
 
 
-def _rule7(world: World, flat: _Flat, out: _Findings) -> None:
-    def describe(i: int) -> str:
-        c = _contacts(world, flat.take(slice(i, i + 1)))
-        names = sorted({c.labels[j] for j in np.flatnonzero(c.on[0])}, key=lambda s: (s.startswith("finger"), s))
-        present = f"contacts present: {', '.join(names)}" if names else "the object touches nothing"
-        return f"no contact forces in the friction cones balance the weight ({present})"
+def _present(c: _Contacts) -> str:
+    names = sorted({c.labels[j] for j in np.flatnonzero(c.on[0])}, key=lambda s: (s.startswith("finger"), s))
+    return f"contacts present: {', '.join(names)}" if names else "the object touches nothing"
 
-    out.flag(7, ~_support(world, flat), describe)
+
+def _rules789(world: World, flat: _Flat, out: _Findings) -> _Support:
+    """Rules 7-9. A waypoint that breaks rule 7 breaks rules 8 and 9 too (their cones are
+    subsets), and one that breaks rule 8 breaks rule 9: each is reported under the first
+    rule it breaks only."""
+    max_force = getattr(world.gripper, "max_force", None)
+    sup = _support(world, flat, max_force)
+
+    def describe7(i: int) -> str:
+        c = _contacts(world, flat.take(slice(i, i + 1)))
+        return f"no contact forces in the friction cones balance the weight ({_present(c)})"
+
+    def describe8(i: int) -> str:
+        c = _contacts(world, flat.take(slice(i, i + 1)))
+        mo = _motion(world, flat, np.array([i]), c)
+        drift: dict[str, float] = {}
+        for j in np.flatnonzero(mo.sliding[0]):
+            drift[c.labels[j]] = max(drift.get(c.labels[j], 0.0), abs(float(mo.drift[0, j])))
+        slips = ", ".join(f"{name} slips {_mm(d)}" for name, d in sorted(drift.items(), key=lambda kv: -kv[1]))
+        return (f"over the motion to the next waypoint {slips} (more than {_mm(SLIP_TOL)}); with those "
+                f"contacts sliding (force on the cone edge opposing the slip) no contact forces balance "
+                f"the weight ({_present(c)})")
+
+    def describe9(i: int) -> str:
+        need = (f"needs a finger normal force of {sup.force[i]:.2f} N at least" if math.isfinite(sup.force[i])
+                else "has no equilibrium the force LP could find")
+        modes = "" if i == len(flat) - 1 else " with the motion's contact modes"
+        return (f"holding the weight ({world.object.weight:.2f} N){modes} {need}, above the gripper's "
+                f"max_force {max_force:g} N")
+
+    out.flag(7, ~sup.rule7, describe7)
+    out.flag(8, sup.rule7 & ~sup.rule8, describe8)
+    out.flag(9, sup.rule7 & sup.rule8 & ~sup.rule9, describe9, np.nan_to_num(sup.force, nan=np.inf))
+    return sup
 
 
 # --------------------------------------------------------------------------------------
@@ -611,18 +768,11 @@ def _warnings(plan: Plan, scenario: Scenario, flat: _Flat) -> list[str]:
                     f"not {where} (sha256 {scenario.sha256[:12]}...): checking against {where} anyway")
     if plan.scenario != scenario.name:
         warn.append(f"the plan names scenario {plan.scenario!r}, the scenario file is {scenario.name!r}")
-    lo, hi = scenario.world.gripper.width_range
-    outside = (flat.width < lo - _TOL) | (flat.width > hi + _TOL)
-    if outside.any():
-        i = int(np.argmax(outside))
-        warn.append(f"width outside the gripper's range [{lo:g}, {hi:g}] mm at {int(outside.sum())} waypoints "
-                    f"(first: step {flat.step[i]} waypoint {flat.local[i]}, {flat.width[i]:.2f} mm); "
-                    "no rule of the spec covers it")
     return warn
 
 
 def validate_plan(plan: Plan, scenario: Scenario) -> ValidationReport:
-    """Check a plan against its scenario: the seven rules of ``ldhp-plan/1``.
+    """Check a plan against its scenario: rules 0-9 of ``ldhp-plan/1``.
 
     Parameters
     ----------
@@ -634,6 +784,11 @@ def validate_plan(plan: Plan, scenario: Scenario) -> ValidationReport:
     ValidationReport
         ``valid`` iff no rule is broken; every violation found (all rules are checked,
         not only up to the first failure), sorted by step, waypoint and rule.
+
+    Raises
+    ------
+    DomainError
+        The scenario's domain cannot be found or read (rule 0 needs it).
     """
     world = scenario.world
     flat = _Flat.of(plan)
@@ -648,7 +803,8 @@ def validate_plan(plan: Plan, scenario: Scenario) -> ValidationReport:
         if not step.waypoints:
             out.add(1, s, None, "the step has no waypoint")
     warnings = _warnings(plan, scenario, flat) if len(flat) else []
-    support_checks = 0
+    _rule0(plan, domain_actions(scenario), out)
+    support_checks = force_checks = 0
     if len(flat):
         _rule1(plan, scenario, flat, out)
         _rule2(world, flat, out)
@@ -656,7 +812,7 @@ def validate_plan(plan: Plan, scenario: Scenario) -> ValidationReport:
         _rule4(world, flat, out)
         _rule5(plan, flat, out)
         _rule6(plan, flat, out)
-        _rule7(world, flat, out)
+        force_checks = _rules789(world, flat, out).force_checks
         support_checks = len(flat)
     for w in warnings:
         log.info("warning: %s", w)
@@ -670,4 +826,5 @@ def validate_plan(plan: Plan, scenario: Scenario) -> ValidationReport:
         waypoints_checked=len(flat),
         contacts_checked=int(flat.declared.sum()),
         support_checks=support_checks,
+        force_checks=force_checks,
     )

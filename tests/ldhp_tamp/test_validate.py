@@ -1,8 +1,9 @@
-"""The plan validator: the seven rules of ``ldhp-plan/1`` and ``ldhp-tamp validate``.
+"""The plan validator: rules 0-9 of ``ldhp-plan/1`` and ``ldhp-tamp validate``.
 
 Test data: the spec's examples (``pick.toml``, a valid and an invalid plan) and
 ``tests/data/plans/*.json``, each the valid example edited to break exactly one rule (the
-file's ``breaks_rule`` key says which; its ``description`` says how).
+file's ``breaks_rule`` key says which; its ``description`` says how; an ``against`` key
+names another scenario in that folder to check it against, e.g. one with ``max_force``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from geometry.poses import Pose
 from ldhp_tamp.cli import main
 from ldhp_tamp.plan import Family, Plan, PlanStatus, Step, Waypoint, read_plan
 from ldhp_tamp.scenario import Scenario, load_scenario, load_scenario_string
-from ldhp_tamp.validate import ValidationReport, format_violation, validate_plan
+from ldhp_tamp.validate import RULES, ValidationReport, format_violation, validate_plan
 
 #: The spec's examples: ``shared/`` sits beside the repository (``../shared`` from its root).
 # Copies of ../shared/spec/examples (tests/ldhp_tamp/test_spec_copies.py keeps them equal).
@@ -80,15 +81,22 @@ BROKEN_FILES = sorted(BROKEN.glob("*.json"))
 
 
 def test_there_is_a_broken_plan_for_every_rule() -> None:
-    rules = sorted(json.loads(p.read_text())["breaks_rule"] for p in BROKEN_FILES)
-    assert rules == [1, 2, 3, 4, 5, 6, 7]
+    rules = {json.loads(p.read_text())["breaks_rule"] for p in BROKEN_FILES}
+    assert rules == set(range(10)) == set(RULES)
+
+
+def against(path: Path, pick: Scenario) -> Scenario:
+    """The scenario a broken plan is checked against: ``pick.toml`` unless it names another."""
+    other = json.loads(path.read_text()).get("against")
+    return pick if other is None else load_scenario(path.parent / other, check_planner=False)
 
 
 @pytest.mark.parametrize("path", BROKEN_FILES, ids=[p.stem for p in BROKEN_FILES])
 def test_each_broken_plan_breaks_exactly_its_rule(path: Path, pick: Scenario) -> None:
     rule = json.loads(path.read_text())["breaks_rule"]
-    report = validate_plan(read_plan(path), pick)
+    report = validate_plan(read_plan(path), against(path, pick))
     assert report.rules_broken == {rule}, [format_violation(v, read_plan(path)) for v in report.violations]
+    assert report.warnings == ()
 
 
 # --------------------------------------------------------------------------- rule 1
@@ -101,7 +109,7 @@ def test_a_failed_or_empty_plan_is_invalid(pick: Scenario, plan: Plan) -> None:
     assert "no grasp sequence" in report.violations[0].message + report.violations[1].message
     other = validate_plan(replace(plan, format="ldhp-plan/0"), pick)
     assert where(other) == [(1, None, None, None)]
-    empty = Step("wait", Family.ADJUST_GRASP, {}, ("l1-e1", "l1-e1"), ())
+    empty = Step("close", Family.ADJUST_GRASP, {}, ("l1-e1", "l1-e1"), ())
     hollow = replace(plan, steps=plan.steps[:1] + (empty,) + plan.steps[1:])  # the others still join
     assert where(validate_plan(hollow, pick)) == [(1, 1, None, None)]
 
@@ -251,6 +259,7 @@ gripper = 0.6
 [task]
 start = [0, 50, {angle}]
 goal = [0, 50, {angle}]
+start_grasp = "any"
 '''
 
 
@@ -267,7 +276,7 @@ def test_at_an_object_vertex_the_finger_normal_counts(tilt: float, valid: bool) 
     centre = corner - 5.0 * np.array([math.sin(t), math.cos(t)])
     gripper = Pose(centre[0] + 40.0, centre[1], 0.0)  # finger 1 at (-w/2, 0)
     w = Waypoint(Pose(0.0, 50.0, math.radians(angle)), gripper, 80.0, ((0.0, 50.0), None))
-    step = Step("hold", Family.MOVE_OBJECT, {}, ("free", "free"), (w, w))
+    step = Step("air-move", Family.MOVE_OBJECT, {}, ("free", "free"), (w, w))
     plan = Plan("ldhp-plan/1", "balance", scenario.sha256, PlanStatus.SOLVED, (step,), read_plan(VALID).stats)
     report = validate_plan(plan, scenario)
     assert report.rules_broken == (set() if valid else {7}), report.violations
@@ -292,7 +301,7 @@ def test_rule_7_agrees_with_the_reference_linear_program(pick: Scenario) -> None
 
     for path in (VALID, INVALID, BROKEN / "rule7-unsupported.json", BROKEN / "rule5-sliding-contact.json"):
         flat = _Flat.of(read_plan(path))
-        verdicts = _support(pick.world, flat)
+        verdicts = _support(pick.world, flat).rule7
         for i in range(0, len(flat), 7):
             c = _contacts(pick.world, flat.take(slice(i, i + 1)))
             on = c.on[0]
@@ -315,11 +324,15 @@ def test_another_scenario_file_is_a_warning_not_a_violation(plan: Plan) -> None:
     assert len(report.warnings) == 1 and "sha256" in report.warnings[0]
 
 
-def test_a_width_outside_the_gripper_range_is_a_warning(plan: Plan) -> None:
-    narrow = variant(lambda t: t.replace("opening = [0, 140]", "opening = [0, 110]"))
+@pytest.mark.parametrize("opening, runs", [("[0, 110]", [(2, 0, 0, 30), (2, 1, 0, 1)]),
+                                            ("[0, 119]", []), ("[0, 118.9]", [(2, 0, 0, 30), (2, 1, 0, None)]),
+                                            ("[101.5, 140]", [(2, 1, 4, None), (2, 2, 0, 20)])])
+def test_every_width_lies_in_the_gripper_range_within_1_mm(plan: Plan, opening: str, runs: list) -> None:
+    """Rule 2: widths 120 (approach), 120..100 (close), 100 (lift) against [min, max]."""
+    narrow = variant(lambda t: t.replace("opening = [0, 140]", f"opening = {opening}"))
     report = validate_plan(plan, narrow)
-    assert report.valid
-    assert any("outside the gripper's range" in w and "at 33 waypoints" in w for w in report.warnings)
+    assert where(report) == runs
+    assert all("outside the gripper's opening" in v.message for v in report.violations)
 
 
 # --------------------------------------------------------------------------- speed
@@ -339,7 +352,7 @@ def test_a_long_plan_validates_quickly(pick: Scenario, plan: Plan) -> None:
 
         contacts = tuple(tuple(map(float, r.apply(np.array(c) - com) + com)) for c in last.finger_contacts)
         turn.append(Waypoint(about(last.object), about(last.gripper), last.width, contacts))
-    long = replace(plan, steps=plan.steps + (Step("turn", Family.MOVE_OBJECT, {}, ("free", "free"), tuple(turn)),))
+    long = replace(plan, steps=plan.steps + (Step("air-move", Family.MOVE_OBJECT, {}, ("free", "free"), tuple(turn)),))
     t0 = time.perf_counter()
     report = validate_plan(long, pick)
     elapsed = time.perf_counter() - t0
