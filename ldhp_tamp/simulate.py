@@ -641,7 +641,7 @@ def write_gif(report: SimulationReport, plan: Plan, scenario: Scenario, path: st
     pad = 0.15 * float(max(hi - lo)) + 20.0
     lo, hi = lo - pad, hi + pad
     aspect = (hi[1] - lo[1]) / (hi[0] - lo[0])
-    fig = Figure(figsize=(6.4, max(2.5, min(8.0, 6.4 * aspect + 0.6))), dpi=width_px / 6.4)
+    fig = Figure(figsize=(6.4, max(2.5, min(8.0, 6.4 * aspect + 0.6))), dpi=width_px / 6.4, layout="tight")
     canvas = FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     images: list[Any] = []
@@ -659,7 +659,7 @@ def write_gif(report: SimulationReport, plan: Plan, scenario: Scenario, path: st
         bad = r.position_error_mm > 0 and (report.diverged_step is not None and
                                            (r.step, r.waypoint) >= (report.diverged_step, report.diverged_waypoint or 0))
         ax.add_patch(PolygonPatch(world.object_vertices(Pose.from_degrees(*r.planned)), closed=True, fill=False,
-                                  edgecolor="#5a5a5a", linestyle=(0, (2, 2)), linewidth=0.9))
+                                  edgecolor="#5a5a5a", linestyle=(0, (2, 2)), linewidth=0.9, zorder=5))
         ax.add_patch(PolygonPatch(world.object_vertices(Pose.from_degrees(*r.simulated)), closed=True,
                                   facecolor="#fcae91" if bad else "#9ecae1",
                                   edgecolor="#a50f15" if bad else "#08519c", linewidth=1.0))
