@@ -222,9 +222,57 @@ def cmd_render(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Replay a plan open-loop in the MuJoCo simulation; exit 0 when it executes, 1 when it
+    diverges (or the plan is a failed plan), 2 on bad input."""
+    from pathlib import Path
+
+    from ldhp_tamp.plan import read_plan
+    from ldhp_tamp.scenario import load_scenario
+    from ldhp_tamp.simulate import SimOptions, format_verdict, simulate_plan, write_gif, write_report
+
+    plan = read_plan(args.plan)
+    scenario = load_scenario(args.scenario, check_planner=False)
+    for flag, path in (("--out", args.out), ("--gif", args.gif)):
+        if path and not Path(path).resolve().parent.is_dir():  # before the simulation, not after it
+            raise InputError(f"{path}: {flag}: no such directory: {Path(path).resolve().parent}")
+    options = SimOptions() if args.speed is None else SimOptions(speed_mm_s=args.speed)
+    report = simulate_plan(plan, scenario, options)
+    print(format_verdict(report))
+    if report.records:
+        print(f"  max error to the plan: {report.max_position_error_mm:.2f} mm, {report.max_angle_error_deg:.2f} deg "
+              f"over {len(report.records)} waypoints")
+        if report.final_position_error_mm is not None:
+            print(f"  final error to the goal: {report.final_position_error_mm:.2f} mm, "
+                  f"{report.final_angle_error_deg:.2f} deg")
+        force = f"{report.max_force_n:g} N" + (" (default: the scenario gives no max_force)"
+                                               if report.max_force_default else "")
+        print(f"  simulated {report.simulated_s:.1f} s in {report.wall_s:.1f} s at {options.speed_mm_s:g} mm/s; "
+              f"finger force cap {force}")
+    if args.out:
+        print(f"wrote {write_report(report, args.out, args.plan, args.scenario, options)}")
+    if args.gif:
+        if report.records:
+            frames = write_gif(report, plan, scenario, args.gif)
+            print(f"wrote {args.gif} ({frames} frames)")
+        else:
+            print(f"note: {args.gif} not written: nothing was simulated", file=sys.stderr)
+    return EXIT_OK if report.executes else EXIT_NO_PLAN
+
+
+def _speed(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a speed in mm/s, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive speed in mm/s, got {text!r}")
+    return value
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "check": cmd_check, "validate": cmd_validate, "solve": cmd_solve, "bench": cmd_bench,
-    "ablate": cmd_ablate, "render": cmd_render}
+    "ablate": cmd_ablate, "render": cmd_render, "simulate": cmd_simulate}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -332,6 +380,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frames", type=int, default=150, metavar="N",
                    help="at most N animation frames (default 150)")
     p.add_argument("--dpi", type=int, default=150, metavar="N", help="resolution of the PNG figures (default 150)")
+
+    p = sub.add_parser("simulate", help="replay a plan in a MuJoCo physics simulation: does it execute?",
+                       description="Replay a plan open-loop in a MuJoCo simulation of its scenario: the hand\n"
+                                   "follows the plan's gripper poses and widths slowly, the object is free.\n"
+                                   "It executes when the object stays within 15 mm and 15 degrees of the\n"
+                                   "planned pose at every waypoint and ends within 10 mm and 10 degrees of\n"
+                                   "the goal; otherwise it diverges at the step of the first waypoint beyond.\n"
+                                   "See docs/design/simulation.md.",
+                       epilog="exit status:\n  0   the plan executes\n  1   it diverges (or the plan is a "
+                              "failed plan)\n  2   bad input or usage (the message names the file and the "
+                              "problem)\n  70  a bug\n",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("plan", metavar="PLAN", help="plan JSON file (ldhp-plan/1)")
+    p.add_argument("--scenario", required=True, metavar="SCENARIO", help="the scenario TOML file")
+    p.add_argument("--out", metavar="REPORT", help="write the simulation report (JSON, ldhp-sim-report/1)")
+    p.add_argument("--gif", metavar="FILE", help="draw the simulated run as an animated GIF")
+    p.add_argument("--speed", type=_speed, metavar="MM_PER_S",
+                   help="speed of the fastest point of the hand (default 5 mm/s)")
     return parser
 
 
