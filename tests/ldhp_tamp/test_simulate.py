@@ -49,6 +49,28 @@ FAR = Pose.from_degrees(0.0, 600.0, 0.0)  # the gripper, far above and still
 # -------------------------------------------------------------------------------- model
 
 
+@pytest.mark.parametrize("module", ["simulate.py", "sim_model.py"])
+def test_simulator_never_imports_the_planner(module: str) -> None:
+    """Like the validator: geometry, scenario, plan, files, errors (and the model builder)
+    only; mujoco and matplotlib inside functions, not at import time."""
+    import ast
+
+    tree = ast.parse((REPO / "ldhp_tamp" / module).read_text())
+    allowed = {"ldhp_tamp.scenario", "ldhp_tamp.plan", "ldhp_tamp.files", "ldhp_tamp.errors",
+               "ldhp_tamp.sim_model"}
+    for node in ast.walk(tree):
+        names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                 else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+        for name in names:
+            if name.startswith("ldhp_tamp"):
+                assert name in allowed, f"{module} imports {name}"
+    top = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
+    for node in top:
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
+        assert not any(n.split(".")[0] in {"mujoco", "matplotlib", "PIL"} for n in names), module
+
+
+
 def test_convex_pieces_of_a_concave_polygon_cover_it() -> None:
     poly = np.array([[0, 0], [70, 0], [70, 50], [50, 65], [70, 80], [70, 150], [45, 150], [35, 130],
                      [25, 150], [0, 150], [-5, 75]], dtype=float)
