@@ -554,8 +554,8 @@ def _rule0(plan: Plan, domain: DomainActions, out: _Findings) -> None:
             out.add(0, s, None, f"primitive {step.primitive!r} is not an action of {where}; its actions: "
                     + ", ".join(domain.names()))
         elif family is not step.family:
-            out.add(0, s, None, f"family is {step.family.value!r}, but {step.primitive!r} is a "
-                    f"{family.value} action of {where}")
+            out.add(0, s, None, f"family is {step.family.value!r}, but {step.primitive!r} is "
+                    f"{family.value} in {where}")
 
 
 def _rule1(plan: Plan, scenario: Scenario, flat: _Flat, out: _Findings) -> None:

@@ -638,3 +638,82 @@ def test_reference_outside_span_needs_no_solve(monkeypatch):
     one = Contacts.make([[0.0, 0.0]], [UP], 0.7, S)
     r = feasible_reference(one, [3.0, 10.0], 12.0)
     assert r.status is FeasibilityStatus.INFEASIBLE and "span" in r.solver_status
+
+
+# --------------------------------------------------------------------------------------
+# bounded_support: the finger force limit (plan rule 9) and the force solution
+# --------------------------------------------------------------------------------------
+
+
+def _pinch(mu: float, modes=(S, S), slide=((0.0, 0.0), (0.0, 0.0))) -> Contacts:
+    """A block pinched at its ends (x = -30, +30) by two horizontal fingers."""
+    return Contacts.make([[-30.0, 0.0], [30.0, 0.0]], [[1.0, 0.0], [-1.0, 0.0]], mu, list(modes), list(slide))
+
+
+@pytest.mark.parametrize("mu, weight", [(0.5, 9.81), (0.2, 4.905), (1.0, 20.0)])
+def test_bounded_support_pinch_needs_w_over_2_mu_per_finger(mu: float, weight: float):
+    need = weight / (2 * mu)
+    for limit, ok in ((need * 1.001, True), (need * 0.999, False), (None, True)):
+        r = mech.bounded_support(_pinch(mu), [0.0, 0.0], 40.0, weight, [0, 1], limit)
+        assert bool(r.feasible[0]) is ok and bool(r.equilibrium[0])
+        assert r.max_finger_force[0] == pytest.approx(need, rel=1e-6)
+        # each finger presses with W / (2 mu); friction carries half the weight each, on the cone edge
+        assert r.forces[0, :, 0] == pytest.approx([need, need], rel=1e-6)
+        assert r.finger_forces[0, :, 0] == pytest.approx([need, need], rel=1e-6)
+        assert np.abs(r.forces[0, :, 1]) == pytest.approx([weight / 2, weight / 2], rel=1e-6)
+
+
+def test_bounded_support_respects_the_sliding_modes():
+    # finger 2 slips down relative to the object (the object moves up: friction pulls it down)
+    down = _pinch(0.5, (S, SL), ((0, 0), (0.0, 1.0)))
+    assert not mech.bounded_support(down, [0.0, 0.0], 40.0, 9.81, [0, 1]).feasible[0]
+    # the object moves down relative to finger 2: kinetic friction mu N up; the moment
+    # balance puts finger 1's friction on its cone edge too (closed cones: margin 0)
+    up = _pinch(0.5, (S, SL), ((0, 0), (0.0, -1.0)))
+    r = mech.bounded_support(up, [0.0, 0.0], 40.0, 9.81, [0, 1], margin=0.0)
+    assert r.feasible[0] and r.max_finger_force[0] == pytest.approx(9.81, rel=1e-6)
+    f2 = r.forces[0, 1]
+    assert abs(f2[1]) == pytest.approx(0.5 * f2[0], rel=1e-6)  # on the cone edge
+
+
+def test_bounded_support_agrees_with_the_cone_test_without_a_limit():
+    """max_force = inf: the same verdict as feasible_batch at the same margin, and where
+    feasible, forces that balance the weight (force and moment)."""
+    rng = np.random.default_rng(7)
+    contacts, com, L = random_instances(rng, 600)
+    finger_of = np.where(np.arange(4) >= 2, np.arange(4) - 2, -1)  # contacts 2, 3 are fingers
+    for margin in (0.0, FEASIBILITY_MARGIN):
+        r = mech.bounded_support(contacts, com, L, 9.81, finger_of, math.inf, margin=margin)
+        cone = feasible_batch(contacts, com, L, margin=margin)
+        assert (r.feasible == cone).all() and (r.equilibrium == cone).all()
+    ok = np.flatnonzero(r.feasible)
+    assert 100 < ok.size < 550
+    n = contacts.normals[ok]
+    t = np.stack([-n[..., 1], n[..., 0]], -1)
+    f = r.forces[ok, :, :1] * n + r.forces[ok, :, 1:] * t  # (k, C, 2) world forces
+    assert f.sum(axis=1) == pytest.approx(np.tile([0.0, 9.81], (ok.size, 1)), abs=1e-5)
+    arm = contacts.points[ok] - com[ok][:, None, :]
+    moment = (arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0]).sum(axis=1)
+    assert moment == pytest.approx(np.zeros(ok.size), abs=1e-5 * L)
+    largest = np.maximum(r.finger_forces[ok, 0, 0], r.finger_forces[ok, 1, 0])
+    assert r.max_finger_force[ok] == pytest.approx(np.maximum(largest, 0.0), abs=1e-6)
+    bad = np.flatnonzero(~r.feasible)
+    assert np.isnan(r.forces[bad]).all() and np.isnan(r.max_finger_force[bad]).all()
+
+
+def test_bounded_support_minimises_the_largest_finger_force():
+    """On a table with a finger on each side the table carries the weight: no finger
+    needs to push, whatever the limit."""
+    c = Contacts.make([[-20.0, -10.0], [20.0, -10.0], [-20.0, 0.0], [20.0, 0.0]],
+                      [UP, UP, [1.0, 0.0], [-1.0, 0.0]], 0.3)
+    r = mech.bounded_support(c, [0.0, 0.0], 25.0, 9.81, [-1, -1, 0, 1], max_force=1e-3)
+    assert r.feasible[0] and r.max_finger_force[0] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_bounded_support_input_checks():
+    with pytest.raises(GeometryError):
+        mech.bounded_support(_pinch(0.5), [0.0, 0.0], 40.0, 9.81, [0, 2])
+    with pytest.raises(GeometryError):
+        mech.bounded_support(_pinch(0.5), [0.0, 0.0], 40.0, -1.0, [0, 1])
+    with pytest.raises(GeometryError):
+        mech.bounded_support(_pinch(0.5), [0.0, 0.0], 40.0, 9.81, [0, 1], max_force=0.0)

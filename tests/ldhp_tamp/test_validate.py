@@ -414,3 +414,153 @@ def test_cli_missing_files_exit_2(tmp_path: Path, capsys) -> None:
     with pytest.raises(SystemExit) as exc:
         main(["validate", str(VALID)])  # --scenario is required
     assert exc.value.code == 2
+
+
+# --------------------------------------------------------------------------- rule 0
+
+
+def test_primitives_match_the_domain_case_insensitively(pick: Scenario, plan: Plan) -> None:
+    steps = list(plan.steps)
+    steps[1] = replace(steps[1], primitive="Close")
+    assert validate_plan(replace(plan, steps=tuple(steps)), pick).valid
+    steps[1] = replace(steps[1], primitive="close", family=Family.MOVE_OBJECT)
+    report = validate_plan(replace(plan, steps=tuple(steps)), pick)
+    assert (0, 1, None, None) in where(report)
+    assert "family is 'move-object', but 'close' is adjust-grasp in domain 'ldhp'" in report.violations[0].message
+
+
+def test_rule_0_reads_the_domain_the_scenario_names(plan: Plan, tmp_path: Path) -> None:
+    from ldhp_tamp.errors import DomainError
+
+    no_air = Path(__file__).resolve().parents[1] / "data" / "domains" / "no-air-move.pddl"
+    ablated = variant(lambda t: t + f"\n[planner]\ndomain = {json.dumps(str(no_air))}\n")
+    report = validate_plan(plan, ablated)
+    assert where(report) == [(0, 2, None, None)] and "'air-move' is not an action" in report.violations[0].message
+    unknown = variant(lambda t: t + "\n[planner]\ndomain = \"no-such-domain\"\n")
+    with pytest.raises(DomainError, match="no-such-domain"):
+        validate_plan(plan, unknown)
+
+
+# --------------------------------------------------------------------------- rule 8
+
+
+def _balance(step_deg: float, steps: int = 3) -> tuple[Plan, Scenario]:
+    """The block balanced on its corner v1 = (0, 50) above a round finger (radius 5,
+    centre (0, 45)); the gripper pivots about that centre by ``step_deg`` per waypoint
+    while the block stays: the finger's surface slips under the corner by 5 x turn."""
+    angle = 90.0 - math.degrees(math.atan2(20.0, 50.0))
+    scenario = load_scenario_string(TWO_POINT.format(angle=angle), "balance.toml", check_planner=False)
+    centre = np.array([0.0, 45.0])
+    obj = Pose(0.0, 50.0, math.radians(angle))
+    wps = []
+    for j in range(steps + 1):
+        phi = math.radians(step_deg * j)
+        origin = centre + 40.0 * np.array([math.cos(phi), math.sin(phi)])  # finger 1 at (-w/2, 0)
+        wps.append(Waypoint(obj, Pose(float(origin[0]), float(origin[1]), phi), 80.0, ((0.0, 50.0), None)))
+    step = Step("pivot", Family.ADJUST_GRASP, {}, ("free", "free"), tuple(wps))
+    return Plan("ldhp-plan/1", "balance", scenario.sha256, PlanStatus.SOLVED, (step,), read_plan(VALID).stats), scenario
+
+
+@pytest.mark.parametrize("step_deg, rules", [(1.0, set()), (2.0, {8}), (-2.0, {8})])
+def test_a_round_finger_pivoting_about_its_centre_slips(step_deg: float, rules: set[int]) -> None:
+    """5 mm x 1 deg = 0.087 mm per motion sticks; 5 mm x 2 deg = 0.175 mm slides, and a
+    sliding contact's force is on a cone edge: it cannot hold the corner up vertically."""
+    from ldhp_tamp.validate import _contacts, _Flat, _motion
+
+    plan, scenario = _balance(step_deg)
+    report = validate_plan(plan, scenario)
+    assert report.rules_broken == rules, [format_violation(v, plan) for v in report.violations]
+    if rules:
+        assert where(report) == [(8, 0, 0, 2)]
+        assert f"finger 1 slips {5 * math.radians(abs(step_deg)):.2f} mm" in report.violations[0].message
+    flat = _Flat.of(plan)
+    c = _contacts(scenario.world, flat)
+    mo = _motion(scenario.world, flat, np.arange(len(flat)), c)
+    j = int(np.flatnonzero((c.finger == 0) & c.on[0])[0])  # the radial normal at the corner
+    # the finite turn: the chord 2 r sin(d/2), whose component along the tangent is r sin d
+    assert np.abs(mo.drift[:3, j]) == pytest.approx([5 * math.sin(math.radians(abs(step_deg)))] * 3, rel=1e-9)
+    assert not mo.sliding[3].any()  # nothing after the last waypoint
+
+
+def _slide(plan: Plan, dy: float, n: int = 3) -> Plan:
+    """The valid plan, then a slide: the gripper moves dy per waypoint along the held
+    block's ends (n waypoints), the block stays in the air."""
+    last = plan.steps[-1].waypoints[-1]
+    wps = tuple(replace(last, gripper=Pose(last.gripper.x, last.gripper.y + dy * j, 0.0)) for j in range(n + 1))
+    return replace(plan, steps=plan.steps + (Step("slide", Family.ADJUST_GRASP, {}, ("free", "free"), wps),))
+
+
+@pytest.mark.parametrize("dy, rules", [(-1.0, {8}), (1.0, set()), (-0.09, set())])
+def test_a_short_slide_is_checked_sliding(pick: Scenario, plan: Plan, dy: float, rules: set[int]) -> None:
+    """Both pads slide 3 mm along the held block's ends over three waypoints. Sliding
+    down, their friction pulls the block down: it falls (rule 8). Sliding up, kinetic
+    friction mu N carries it exactly as sticking friction could (valid). Under 0.1 mm
+    per motion the pads stick."""
+    from ldhp_tamp.validate import _contacts, _Flat, _motion
+
+    slid = _slide(plan, dy)
+    report = validate_plan(slid, pick)
+    assert report.rules_broken == rules
+    if rules:
+        assert where(report) == [(8, 3, 0, 2)]
+        assert "finger 1 slips 1.00 mm, finger 2 slips 1.00 mm" in report.violations[0].message
+    flat = _Flat.of(slid).take(slice(-4, None))
+    full = _Flat.of(slid)
+    c = _contacts(pick.world, flat)
+    mo = _motion(pick.world, full, np.arange(len(full) - 4, len(full)), c)
+    fingers = c.finger >= 0
+    sliding = mo.sliding[:, fingers & c.on[0]]
+    assert sliding[:3].all() == (abs(dy) > 0.1) and not sliding[3].any()
+    if abs(dy) > 0.1:  # the object's velocity relative to the pads: opposite the gripper's
+        dirs = mo.slide_dirs[:3][:, fingers & c.on[0]]
+        assert dirs[..., 1] == pytest.approx(np.full(dirs.shape[:2], -math.copysign(1.0, dy)))
+
+
+def test_a_width_change_moves_each_finger_by_half_of_it(pick: Scenario) -> None:
+    """A fingertip resting on the block's top face while the gripper closes 1 mm per
+    waypoint: finger 1 moves +0.5 mm along the face (slides), the block stays on the table."""
+    from ldhp_tamp.validate import _contacts, _Flat, _motion
+
+    wps = tuple(Waypoint(Pose(0.0, 0.0, 0.0), Pose(50.0, 40.0, 0.0), 60.0 - j, ((15.0 + 0.5 * j, 40.0), None))
+                for j in range(4))
+    plan = replace(read_plan(VALID), steps=(Step("close", Family.ADJUST_GRASP, {}, ("l1-e1", "l1-e1"), wps),))
+    still = variant(lambda t: t.replace("goal = [0, 100, 0]", "goal = [0, 0, 0]"))
+    assert validate_plan(plan, still).valid  # the table carries the block: the slip is harmless
+    flat = _Flat.of(plan)
+    c = _contacts(still.world, flat)
+    mo = _motion(still.world, flat, np.arange(4), c)
+    j = int(np.flatnonzero((c.finger == 0) & c.on[0])[0])
+    # the top face's inward normal is (0, -1), t = (1, 0): the block moves -0.5 mm relative to finger 1
+    assert mo.drift[:3, j] == pytest.approx([-0.5] * 3) and mo.sliding[:3, j].all()
+
+
+# --------------------------------------------------------------------------- rule 9
+
+
+@pytest.mark.parametrize("limit, valid", [(8.2, True), (8.15, False), (100.0, True)])
+def test_the_finger_force_limit(plan: Plan, limit: float, valid: bool) -> None:
+    """A 1 kg block pinched with mu = 0.6 needs 9.81 / 1.2 = 8.175 N per finger in the air."""
+    bounded = variant(lambda t: t.replace("opening = [0, 140]", f"opening = [0, 140]\nmax_force = {limit}"))
+    report = validate_plan(plan, bounded)
+    assert report.valid == valid
+    assert report.force_checks == 1 + 21  # the close's last waypoint and the lift
+    if not valid:
+        assert where(report) == [(9, 2, 1, 20)]
+        assert "8.18 N at least" in report.violations[0].message
+
+
+def test_heavier_objects_need_more_force(plan: Plan) -> None:
+    light = variant(lambda t: t.replace("opening = [0, 140]", "opening = [0, 140]\nmax_force = 5")
+                    .replace("[object]", "[object]\nmass = 0.5"))
+    assert validate_plan(plan, light).valid  # 4.09 N per finger
+    heavy = variant(lambda t: t.replace("opening = [0, 140]", "opening = [0, 140]\nmax_force = 5")
+                    .replace("[object]", "[object]\nmass = 0.7"))
+    assert validate_plan(plan, heavy).rules_broken == {9}  # 5.72 N
+
+
+def test_cli_names_the_new_rules(capsys) -> None:
+    path = BROKEN / "rule9-pinch-above-max-force.json"
+    assert main(["validate", str(path), "--scenario", str(BROKEN / "pick-max-force-8.toml")]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("rule 9 (finger force limit), step 2 (air-move), waypoints 1-20: ")
+    assert "violation of rules 9 (finger force limit)" in out[-1]
