@@ -1,0 +1,210 @@
+"""The quasi-static forward problem: which object motion a commanded gripper motion makes.
+
+A plan commands the gripper's motion (position control); the object's motion follows
+from contact mechanics. :func:`geometry.mechanics.feasible_batch` answers "do balancing
+forces exist for the *planned* contact modes?"; that is necessary, not enough: the same
+finger motion may let the object take *another* motion (a block tipped by one finger on
+a slippery floor slides instead: both motions balance, and the one with the sliding
+floor contact is what happens). This module enumerates the object motions consistent
+with the commanded finger motion and decides whether any other than the planned one is
+quasi-statically consistent.
+
+Model (planar, rigid, quasi-static, Coulomb)
+---------------------------------------------
+Per waypoint, the contacts present: a point ``p``, a unit normal ``n`` into the object, a
+coefficient ``mu`` and the velocity ``w`` of the *other* body's material point at ``p``
+(zero for the environment; the finger's for a finger contact, from the commanded
+gripper motion). The object's unknown twist ``xi = (v, omega)`` (about the COM) gives the
+object's material velocity ``u(p) = v + omega J (p - com)``, ``J`` the quarter turn, and
+the relative velocity ``r = u - w``. Each contact takes one mode:
+
+- STICKING: ``r = 0`` (two equations); force anywhere in the cone;
+- SLIDING: ``r . n = 0`` and ``r . t != 0`` (one equation); force on the cone edge
+  opposing ``r``;
+- SEPARATING (free): ``r . n >= 0``; no force.
+
+A mode assignment whose equations fix the twist (rank 3) is *consistent* when the twist
+it gives respects every contact's mode (no penetration, sliding really slides, the
+equations hold: an over-determined assignment may be inconsistent) and the weight is
+balanced with the modes' force sets (:func:`geometry.mechanics.feasible_batch`, closed
+cones: margin 0, the permissive reading, so that an alternative that is only just
+possible counts). A waypoint is **ambiguous** when a consistent assignment gives a twist
+other than the planned one. Assignments that leave the twist undetermined (rank < 3:
+e.g. a pinch slipping as a whole) are not enumerated: for two fingers that squeeze the
+object the grip force decides slip, which the force limit (plan rule 9) and the friction
+margin govern.
+
+Everything is vectorised over waypoints; assignments are enumerated (3^C for C contacts
+present, at most :data:`MAX_CONTACTS`).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from geometry import mechanics
+from geometry.errors import GeometryError
+from geometry.poses import BoolArray, FloatArray
+
+__all__ = ["MAX_CONTACTS", "ForwardCheck", "alternative_motions"]
+
+#: Contacts per waypoint the enumeration takes (3^6 = 729 assignments).
+MAX_CONTACTS = 6
+
+_FREE, _STICK, _SLIDE = 0, 1, 2
+
+
+@dataclass(frozen=True, eq=False)
+class ForwardCheck:
+    """The forward problem's answer per waypoint.
+
+    Attributes
+    ----------
+    ambiguous : ndarray of bool, shape (B,)
+        Another object motion than the planned one is quasi-statically consistent.
+    twist : ndarray, shape (B, 3)
+        For an ambiguous waypoint, one such motion (object twist about the COM, per unit
+        of the commanded motion: mm and rad); zeros elsewhere.
+    modes : ndarray of int8, shape (B, C)
+        Its contact modes (:class:`~geometry.mechanics.ContactMode` codes).
+    """
+
+    ambiguous: BoolArray
+    twist: FloatArray
+    modes: NDArray[np.int8]
+
+
+def _rows(points: FloatArray, normals: FloatArray, com: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The rows giving ``r . n`` and ``r . t`` as ``row . xi`` (B, C, 3) each (without
+    the other body's velocity)."""
+    d = points - com[:, None, :]
+    jd = np.stack([-d[..., 1], d[..., 0]], axis=-1)  # J (p - com)
+    n = normals
+    t = np.stack([-n[..., 1], n[..., 0]], axis=-1)
+    rn = np.concatenate([n, (jd * n).sum(-1, keepdims=True)], axis=-1)
+    rt = np.concatenate([t, (jd * t).sum(-1, keepdims=True)], axis=-1)
+    return rn, rt
+
+
+def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, present: ArrayLike,
+                        other_velocity: ArrayLike, com: ArrayLike, length_scale: float,
+                        planned_twist: ArrayLike, *, relative_tol: float = 1e-3) -> ForwardCheck:
+    """Whether the commanded motion admits another consistent object motion.
+
+    Parameters
+    ----------
+    points, normals : array_like, shape (B, C, 2)
+        World contact points and unit normals into the object.
+    mu : array_like, shape (B, C)
+    present : array_like of bool, shape (B, C)
+        Padding slots are False.
+    other_velocity : array_like, shape (B, C, 2)
+        Velocity of the other body's material point at each contact (mm per unit of
+        the commanded motion): zero for the environment.
+    com : array_like, shape (B, 2)
+        World centre of mass.
+    length_scale : float
+        The object's ``L`` (mm): rotations compare to translations as ``omega * L``.
+    planned_twist : array_like, shape (B, 3)
+        The planned object twist ``(v_x, v_y, omega)`` about the COM.
+    relative_tol : float
+        Velocities below ``relative_tol`` times the motion's scale are zero.
+
+    Returns
+    -------
+    ForwardCheck
+
+    Examples
+    --------
+    A block on a frictionless floor pushed sideways at its top by a finger that sticks to
+    it: the planned tip about the bottom-right corner competes with sliding.
+
+    >>> pts = [[[0.0, 0.0], [10.0, 0.0], [0.0, 20.0]]]
+    >>> nrm = [[[0.0, 1.0], [0.0, 1.0], [1.0, 0.0]]]
+    >>> w = [[[0.0, 0.0], [0.0, 0.0], [1.0, 0.0]]]
+    >>> chk = alternative_motions(pts, nrm, [[0.0, 0.0, 1.0]], [[True] * 3], w, [[5.0, 10.0]], 22.0,
+    ...                           [[1.0, 0.5, -0.1]])
+    >>> bool(chk.ambiguous[0])
+    True
+    """
+    p = np.asarray(points, dtype=float)
+    n = np.asarray(normals, dtype=float)
+    if p.ndim != 3 or p.shape != n.shape or p.shape[-1] != 2:
+        raise GeometryError(f"forward: points and normals must have shape (B, C, 2), got {p.shape}, {n.shape}")
+    b, c = p.shape[:2]
+    m = np.broadcast_to(np.asarray(mu, dtype=float), (b, c))
+    live = np.broadcast_to(np.asarray(present, dtype=bool), (b, c))
+    w = np.broadcast_to(np.asarray(other_velocity, dtype=float), (b, c, 2))
+    cm = np.broadcast_to(np.asarray(com, dtype=float).reshape(-1, 2), (b, 2))
+    plan = np.broadcast_to(np.asarray(planned_twist, dtype=float).reshape(-1, 3), (b, 3))
+    count = live.sum(axis=1)
+    if (count > MAX_CONTACTS).any():
+        raise GeometryError(f"forward: at most {MAX_CONTACTS} contacts per waypoint, got {int(count.max())}")
+    # contacts present first, padding after
+    order = np.argsort(~live, axis=1, kind="stable")[:, :MAX_CONTACTS]
+    k = min(c, MAX_CONTACTS)
+    take = lambda a: np.take_along_axis(a, order[..., None] if a.ndim == 3 else order, axis=1)  # noqa: E731
+    p, n, m, live, w = take(p), take(n), take(m), take(live), take(w)
+    rn, rt = _rows(p, n, cm)
+    wn = (w * n).sum(-1)
+    tvec = np.stack([-n[..., 1], n[..., 0]], axis=-1)
+    wt = (w * tvec).sum(-1)
+    L = float(length_scale)
+    scale = np.maximum(np.abs(plan[:, :2]).max(axis=1), np.abs(plan[:, 2]) * L)
+    scale = np.maximum(scale, np.linalg.norm(w, axis=-1).max(axis=1, initial=0.0))
+    tol = np.maximum(relative_tol * scale, 1e-12)
+    weights = np.array([1.0, 1.0, L])  # compare twists with the rotation in mm
+
+    ambiguous = np.zeros(b, dtype=bool)
+    found_twist = np.zeros((b, 3))
+    found_modes = np.zeros((b, c), dtype=np.int8)
+    for assign in itertools.product((_FREE, _STICK, _SLIDE), repeat=k):
+        a = np.asarray(assign, dtype=np.int8)
+        # padding slots must be FREE; instances with fewer contacts take the prefix
+        valid = ~((a[None, :] != _FREE) & ~live).any(axis=1) & ~ambiguous
+        stick, slide = a == _STICK, a == _SLIDE
+        n_eq = 2 * int(stick.sum()) + int(slide.sum())
+        if n_eq < 3 or not valid.any():
+            continue
+        idx = np.flatnonzero(valid)
+        A = np.concatenate([rn[idx][:, stick | slide], rt[idx][:, stick]], axis=1)  # (b', n_eq, 3)
+        y = np.concatenate([wn[idx][:, stick | slide], wt[idx][:, stick]], axis=1)
+        # least squares per instance; rank must be 3
+        sv = np.linalg.svd(A, compute_uv=False)
+        ok = sv[:, 2] > 1e-9 * np.maximum(sv[:, 0], 1e-300)
+        if not ok.any():
+            continue
+        idx, A, y = idx[ok], A[ok], y[ok]
+        xi = np.linalg.solve(np.einsum("bki,bkj->bij", A, A), np.einsum("bki,bk->bi", A, y)[..., None])[..., 0]
+        resid = np.abs(np.einsum("bki,bi->bk", A, xi) - y).max(axis=1)
+        t0 = tol[idx]
+        r_n = np.einsum("bci,bi->bc", rn[idx], xi) - wn[idx]
+        r_t = np.einsum("bci,bi->bc", rt[idx], xi) - wt[idx]
+        lv = live[idx]
+        cons = resid <= t0
+        cons &= ~((r_n < -t0[:, None]) & lv).any(axis=1)  # nothing penetrates
+        cons &= ~(slide[None, :] & (np.abs(r_t) <= t0[:, None])).any(axis=1)  # sliding slides
+        differs = (np.abs((xi - plan[idx]) * weights) > t0[:, None]).any(axis=1)
+        cons &= differs
+        if not cons.any():
+            continue
+        idx, xi, r_t = idx[cons], xi[cons], r_t[cons]
+        modes = np.where(live[idx], np.where(stick, mechanics.ContactMode.STICKING,
+                                             np.where(slide, mechanics.ContactMode.SLIDING,
+                                                      mechanics.ContactMode.SEPARATING)),
+                         mechanics.ContactMode.ABSENT).astype(np.int8)
+        sdir = np.where((slide[None, :] & live[idx])[..., None], np.sign(r_t)[..., None] * tvec[idx], 0.0)
+        contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
+                                              np.where(live[idx], m[idx], 0.0), modes, sdir)
+        feas = mechanics.feasible_batch(contacts, cm[idx], L, margin=0.0)
+        hit = idx[feas]
+        ambiguous[hit] = True
+        found_twist[hit] = xi[feas]
+        back = np.zeros((hit.size, c), dtype=np.int8)
+        np.put_along_axis(back, order[hit], np.pad(modes[feas], ((0, 0), (0, max(c - k, 0))))[:, :c], axis=1)
+        found_modes[hit] = back
+    return ForwardCheck(ambiguous, found_twist, found_modes)

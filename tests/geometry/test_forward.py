@@ -1,0 +1,69 @@
+"""The quasi-static forward problem (geometry.forward): is the planned object motion the
+only one the commanded finger motion allows?"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from geometry import mechanics
+from geometry.errors import GeometryError
+from geometry.forward import MAX_CONTACTS, alternative_motions
+
+# A 10 x 20 block standing on the floor (corners (0, 0) and (10, 0)), a finger on its left
+# side at height h pushing right (+x) and sticking to it.
+COM = np.array([[5.0, 10.0]])
+
+
+def _push(h: float, mu_floor: float, mu_finger: float = 1.0):
+    pts = [[[0.0, 0.0], [10.0, 0.0], [0.0, h]]]
+    nrm = [[[0.0, 1.0], [0.0, 1.0], [1.0, 0.0]]]
+    w = [[[0.0, 0.0], [0.0, 0.0], [1.0, 0.0]]]
+    return pts, nrm, [[mu_floor, mu_floor, mu_finger]], [[True, True, True]], w
+
+
+def _tip_twist(h: float) -> np.ndarray:
+    """The twist (about the COM) of a tip about the corner (10, 0) that moves the finger
+    point (0, h) by (1, ...): omega = -1 / h."""
+    om = -1.0 / h
+    c = COM[0] - np.array([10.0, 0.0])
+    return np.array([[-om * c[1], om * c[0], om]])
+
+
+@pytest.mark.parametrize("h, mu, ambiguous", [
+    (20.0, 0.1, True),   # sliding needs 0.1 W, tipping 0.25 W: the block slides
+    (20.0, 0.8, False),  # sliding needs 0.8 W: it tips as planned
+    (5.0, 0.8, True),    # pushed low (tipping needs W): it slides
+])
+def test_a_pushed_block_tips_only_when_sliding_costs_more(h: float, mu: float, ambiguous: bool) -> None:
+    chk = alternative_motions(*_push(h, mu), COM, 11.2, _tip_twist(h))
+    assert bool(chk.ambiguous[0]) is ambiguous
+    if ambiguous:  # the alternative found slides on the floor (flat, or on one corner)
+        assert mechanics.ContactMode.SLIDING in chk.modes[0, :2].tolist()
+        assert chk.modes[0, 2] == mechanics.ContactMode.STICKING
+
+
+def test_a_planned_slide_is_not_its_own_alternative() -> None:
+    # frictionless floor, pushed low: sliding is what is planned, tipping is impossible
+    chk = alternative_motions(*_push(5.0, 0.0), COM, 11.2, [[1.0, 0.0, 0.0]])
+    assert not chk.ambiguous[0]
+
+
+def test_padding_slots_are_ignored_and_batches_are_independent() -> None:
+    pts, nrm, mu, on, w = _push(20.0, 0.1)
+    pad = lambda a, v: np.concatenate([np.asarray(a, float), np.full((1, 1) + np.shape(a)[2:], v)], axis=1)  # noqa: E731
+    one = alternative_motions(pad(pts, 0.0), pad(nrm, 0.0), pad(mu, 0.0), pad(on, False), pad(w, 0.0), COM, 11.2,
+                              _tip_twist(20.0))
+    assert one.ambiguous.tolist() == [True]
+    pts2, nrm2, mu2, on2, w2 = _push(20.0, 0.8)
+    both = alternative_motions(np.concatenate([pts, pts2]), np.concatenate([nrm, nrm2]), np.concatenate([mu, mu2]),
+                               np.concatenate([on, on2]), np.concatenate([w, w2]), np.concatenate([COM, COM]), 11.2,
+                               np.concatenate([_tip_twist(20.0)] * 2))
+    assert both.ambiguous.tolist() == [True, False]
+
+
+def test_too_many_contacts_is_an_error() -> None:
+    c = MAX_CONTACTS + 1
+    with pytest.raises(GeometryError):
+        alternative_motions(np.zeros((1, c, 2)), np.tile([0.0, 1.0], (1, c, 1)), np.zeros((1, c)), np.ones((1, c), bool),
+                            np.zeros((1, c, 2)), COM, 1.0, np.zeros((1, 3)))
