@@ -40,16 +40,27 @@ class _Parser(argparse.ArgumentParser):
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from ldhp_tamp.scenario import load_scenario, summarize
-
+    """Load each scenario and make every check ``solve`` makes before searching (the
+    domain loads, each of its actions is implemented, the engine can solve it); print a
+    summary of each. Exit 2 if any is refused, naming the file and the problem."""
+    from ldhp_tamp import symbolic
     from ldhp_tamp.contact_graph import ContactPoseError, build_context
+    from ldhp_tamp.errors import ScenarioError
+    from ldhp_tamp.primitives import REGISTRY
+    from ldhp_tamp.scenario import load_scenario, summarize
 
     status = EXIT_OK
     for path in args.scenarios:
         try:
-            scenario = load_scenario(path)
-        except InputError as exc:
+            scenario = load_scenario(path, strict=args.strict)
+            settings = scenario.settings
+            symbolic.load_checked_domain(settings.domain_path or settings.domain, settings.engine, REGISTRY)
+        except ScenarioError as exc:  # its message starts with the scenario file
             print(f"error: {exc}", file=sys.stderr)
+            status = EXIT_BAD_INPUT
+            continue
+        except InputError as exc:  # the domain's or engine's: its message names the domain file
+            print(f"error: {path}: {exc}", file=sys.stderr)
             status = EXIT_BAD_INPUT
             continue
         try:
@@ -68,7 +79,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from ldhp_tamp.validate import RULES, format_violation, validate_plan
 
     plan = read_plan(args.plan)
-    scenario = load_scenario(args.scenario, check_planner=False)
+    scenario = load_scenario(args.scenario, check_planner=False, strict=args.strict)
     report = validate_plan(plan, scenario)
     for warning in report.warnings:
         print(f"warning: {warning}")
@@ -94,7 +105,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     from ldhp_tamp.scenario import load_scenario
     from ldhp_tamp.tamp import SolveOptions, solve
 
-    scenario = load_scenario(args.scenario)
+    scenario = load_scenario(args.scenario, strict=args.strict)
     out = Path(args.out) if args.out else Path(f"{scenario.name}-plan.json")
     if not out.resolve().parent.is_dir():  # before the search, not after it
         raise InputError(f"{out}: --out: no such directory: {out.resolve().parent}")
@@ -232,7 +243,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from ldhp_tamp.simulate import SimOptions, format_verdict, simulate_plan, write_gif, write_report
 
     plan = read_plan(args.plan)
-    scenario = load_scenario(args.scenario, check_planner=False)
+    scenario = load_scenario(args.scenario, check_planner=False, strict=args.strict)
     for flag, path in (("--out", args.out), ("--gif", args.gif)):
         if path and not Path(path).resolve().parent.is_dir():  # before the simulation, not after it
             raise InputError(f"{path}: {flag}: no such directory: {Path(path).resolve().parent}")
@@ -275,6 +286,13 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "ablate": cmd_ablate, "render": cmd_render, "simulate": cmd_simulate}
 
 
+def _add_strict(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--strict", action="store_true",
+                   help="refuse scenario keys that ldhp-scenario/1 does not define (exit 2, naming the "
+                        "key) instead of warning and ignoring them: catches a misspelt optional key, "
+                        "which would leave its default in force")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="ldhp-tamp",
@@ -290,6 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("check", help="load scenarios and print a short summary of each",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenarios", nargs="+", metavar="SCENARIO", help="scenario TOML files")
+    _add_strict(p)
 
     p = sub.add_parser("validate", help="check a plan against its scenario (the rules of ldhp-plan/1)",
                        description="Check every rule of ldhp-plan/1 on every waypoint; print each "
@@ -297,6 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("plan", metavar="PLAN", help="plan JSON file (ldhp-plan/1)")
     p.add_argument("--scenario", required=True, metavar="SCENARIO", help="the scenario TOML file")
+    _add_strict(p)
 
     p = sub.add_parser("solve", help="plan for a scenario and write the plan JSON",
                        description="Run the two-tier LDHP planner on a scenario. The plan is validated "
@@ -313,6 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "out the plan has status 'failed', a reason starting 'timeout' and the "
                         "statistics so far, and the exit status is 1 (default: no limit)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
+    _add_strict(p)
 
     p = sub.add_parser("bench", help="benchmark: every scenario x engine x K x seed, in worker processes",
                        description="Solve every combination scenario x engine x K x seed, each in a worker\n"
@@ -398,6 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gif", metavar="FILE", help="draw the simulated run as an animated GIF")
     p.add_argument("--speed", type=_speed, metavar="MM_PER_S",
                    help="speed of the fastest point of the hand (default 5 mm/s)")
+    _add_strict(p)
     return parser
 
 

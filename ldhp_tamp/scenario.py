@@ -139,12 +139,16 @@ class FeatureNames:
 # --------------------------------------------------------------------------- public API
 
 
-def load_scenario(path: str | os.PathLike[str], *, check_planner: bool = True) -> Scenario:
+def load_scenario(path: str | os.PathLike[str], *, check_planner: bool = True,
+                  strict: bool = False) -> Scenario:
     """Load and validate a scenario file.
 
     Relative domain paths resolve against the file's folder. With ``check_planner=False``
     the domain and engine are not looked up (``settings.domain_path`` stays ``None``);
-    the geometric checks all run.
+    the geometric checks all run. A key the format does not define is logged and ignored
+    (the format allows extensions); with ``strict=True`` it is refused
+    (:class:`~ldhp_tamp.errors.ScenarioError` naming it), which catches a misspelt
+    optional key (``mas = 5``) that would otherwise leave its default in force.
     """
     p = Path(path)
     try:
@@ -152,20 +156,21 @@ def load_scenario(path: str | os.PathLike[str], *, check_planner: bool = True) -
     except OSError as exc:
         raise ScenarioError(p, None, f"cannot read the file: {exc.strerror or exc}") from None
     return _load_bytes(data, label=str(p), path=p, base_dir=p.resolve().parent,
-                       check_planner=check_planner)
+                       check_planner=check_planner, strict=strict)
 
 
 def load_scenario_string(text: str, name: str = "<string>", *,
                          base_dir: str | os.PathLike[str] | None = None,
-                         check_planner: bool = True) -> Scenario:
+                         check_planner: bool = True, strict: bool = False) -> Scenario:
     """Load a scenario from TOML text; ``name`` labels the error messages.
 
     Relative domain paths resolve against ``base_dir`` (default: the current directory).
-    The sha256 is that of the UTF-8 encoded text.
+    The sha256 is that of the UTF-8 encoded text. ``check_planner`` and ``strict`` as for
+    :func:`load_scenario`.
     """
     base = Path(base_dir) if base_dir is not None else Path.cwd()
     return _load_bytes(text.encode("utf-8"), label=name, path=None, base_dir=base,
-                       check_planner=check_planner)
+                       check_planner=check_planner, strict=strict)
 
 
 def find_domain(domain: str, relative_to: str | os.PathLike[str] | None = None) -> Path | None:
@@ -249,9 +254,13 @@ _MISSING: Any = object()
 
 @dataclass(frozen=True)
 class _Reader:
-    """Typed access to the parsed TOML, raising ScenarioError with dotted keys."""
+    """Typed access to the parsed TOML, raising ScenarioError with dotted keys.
+
+    ``strict``: refuse keys the format does not define instead of logging them.
+    """
 
     label: str
+    strict: bool = False
 
     def fail(self, key: str | None, problem: str) -> ScenarioError:
         return ScenarioError(self.label, key, " ".join(problem.split("\n")))
@@ -334,15 +343,21 @@ class _Reader:
 
     def unknown_keys(self, table: Mapping[str, Any], prefix: str, known: Sequence[str],
                      note: str = "") -> None:
-        """Log keys the spec does not define: the project may add keys, so never refuse.
+        """Log keys the format does not define: the format allows extensions, so by
+        default they are ignored. In strict mode the first one is refused.
 
-        A key that looks like a misspelling of an absent known key is logged as a warning.
+        A key that looks like a misspelling of an absent known key is logged as a warning
+        (in strict mode, named in the refusal).
         """
         absent = [k for k in known if k not in table]
         for key in table:
             if key in known:
                 continue
             close = difflib.get_close_matches(key, absent, n=1, cutoff=0.75)
+            if self.strict:
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise self.fail(_join(prefix, key), f"unknown key{note} (strict mode refuses keys "
+                                                    f"{FORMAT} does not define){hint}")
             if close:
                 log.warning("%s: %s: unknown key ignored; did you mean %r?",
                             self.label, _join(prefix, key), close[0])
@@ -351,8 +366,8 @@ class _Reader:
 
 
 def _load_bytes(data: bytes, *, label: str, path: Path | None, base_dir: Path,
-                check_planner: bool) -> Scenario:
-    r = _Reader(label)
+                check_planner: bool, strict: bool = False) -> Scenario:
+    r = _Reader(label, strict)
     sha = hashlib.sha256(data).hexdigest()
     try:
         text = data.decode("utf-8")

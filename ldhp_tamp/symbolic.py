@@ -56,9 +56,11 @@ from ldhp_tamp.primitives.registry import (
     ActionInfo,
     DomainInfo,
     Family,
+    PrimitiveRegistry,
     Sequel,
     Transition,
     admissibility_predicate,
+    check_against_domain,
 )
 from ldhp_tamp.resources import domains_dir
 from ldhp_tamp.scenario import find_domain
@@ -75,6 +77,7 @@ __all__ = [
     "build_problem",
     "check_engine",
     "emit_pddl",
+    "load_checked_domain",
     "load_domain",
     "parse_domain",
     "solve",
@@ -202,6 +205,43 @@ def load_domain(domain: str | Path, base: Path | None = None) -> SymbolicDomain:
     except (OSError, UnicodeDecodeError) as exc:
         raise DomainError(f"{path}: cannot read domain: {exc}") from exc
     return parse_domain(text, source=str(path))
+
+
+def load_checked_domain(domain: str | Path, engine: str, registry: PrimitiveRegistry,
+                        base: Path | None = None) -> SymbolicDomain:
+    """Load a domain and run every check a solve makes before searching.
+
+    The one place those checks are made, so that ``ldhp-tamp check`` refuses exactly what
+    ``ldhp-tamp solve`` would refuse before any search:
+
+    1. the domain loads (:func:`load_domain`: found, readable, PDDL that parses, the
+       conventions of ``domains/ldhp.pddl``);
+    2. every action has an implementation of the same family in ``registry``
+       (:func:`~ldhp_tamp.primitives.registry.check_against_domain`);
+    3. ``engine`` is installed and supports the domain's features (:func:`check_engine`).
+
+    Parameters
+    ----------
+    domain
+        A shipped domain's name or a ``.pddl`` path (a loaded scenario's
+        ``settings.domain_path``), resolved as by :func:`load_domain` against ``base``.
+    engine
+        The unified-planning engine the solve will use.
+    registry
+        The primitive registry, normally :data:`ldhp_tamp.primitives.REGISTRY`.
+
+    Raises
+    ------
+    DomainError
+        The domain does not load, or an action has no (or a mismatched) implementation;
+        the message names the domain file.
+    EngineError
+        Unknown engine, or one that cannot solve the domain; the message names both.
+    """
+    loaded = load_domain(domain, base)
+    check_against_domain(loaded.info, registry)
+    check_engine(loaded, engine)
+    return loaded
 
 
 def parse_domain(text: str, source: str = "<string>") -> SymbolicDomain:

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from ldhp_tamp import resources
-from ldhp_tamp.cli import EXIT_BAD_INPUT, EXIT_OK, main
+from ldhp_tamp.cli import COMMANDS, EXIT_BAD_INPUT, EXIT_OK, main
 
 REPO = Path(__file__).resolve().parents[2]
 BAD = sorted((REPO / "tests" / "data" / "scenarios" / "bad").glob("*.toml"))
@@ -69,3 +69,96 @@ def test_executable_checks_the_shipped_scenarios() -> None:
     assert run.returncode == EXIT_OK, run.stderr
     assert run.stderr == ""
     assert run.stdout.count("\nscenario ") + run.stdout.startswith("scenario ") == len(SHIPPED)
+
+
+# --------------------------------------------------------------------------- what solve refuses before searching
+
+DOMAINS = REPO / "tests" / "data" / "domains"
+PICK = resources.scenarios_dir() / "example_pick.toml"
+#: Domain files that load and pass the registry and engine checks.
+USABLE_DOMAINS = {"no-air-move.pddl"}
+
+
+def _pick_with_domain(folder: Path, domain: Path) -> Path:
+    path = folder / f"pick-with-{domain.stem}.toml"
+    path.write_text(PICK.read_text() + f"\n[planner]\ndomain = '{domain}'\n")
+    return path
+
+
+@pytest.mark.parametrize("domain", sorted(p for p in DOMAINS.glob("*.pddl") if p.name not in USABLE_DOMAINS),
+                         ids=lambda p: p.name)
+def test_check_refuses_what_solve_refuses_before_searching(domain: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = _pick_with_domain(tmp_path, domain)
+    assert main(["check", str(scenario)]) == EXIT_BAD_INPUT
+    check_out, check_err = capsys.readouterr()
+    assert check_out == ""
+    _one_line_error(check_err, scenario)
+    assert str(domain) in check_err
+    # solve refuses it with the same message (less the scenario's name), before any search
+    assert main(["solve", str(scenario), "--out", str(tmp_path / "plan.json"), "-q"]) == EXIT_BAD_INPUT
+    solve_err = capsys.readouterr().err
+    assert check_err == solve_err.replace("error: ", f"error: {scenario}: ", 1)
+    assert not (tmp_path / "plan.json").exists()
+
+
+def test_check_names_the_action_without_implementation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    domain = DOMAINS / "no-implementation.pddl"
+    scenario = _pick_with_domain(tmp_path, domain)
+    assert main(["check", str(scenario), str(PICK)]) == EXIT_BAD_INPUT
+    out, err = capsys.readouterr()
+    assert out.startswith("scenario example-pick")  # the other file is still checked
+    assert err.strip() == (f"error: {scenario}: {domain}: action 'juggle' has no registered implementation "
+                           "(see docs/extending.md)")
+
+
+@pytest.mark.parametrize("name", sorted(USABLE_DOMAINS))
+def test_check_accepts_a_usable_domain(name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", str(_pick_with_domain(tmp_path, DOMAINS / name))]) == EXIT_OK
+    assert capsys.readouterr().out.startswith("scenario example-pick")
+
+
+# --------------------------------------------------------------------------- --strict
+
+TYPO = REPO / "tests" / "data" / "scenarios" / "good" / "extra_keys.toml"
+
+
+def test_unknown_keys_are_warned_and_ignored_by_default(capsys: pytest.CaptureFixture[str],
+                                                       caplog: pytest.LogCaptureFixture) -> None:
+    assert main(["check", str(TYPO)]) == EXIT_OK
+    assert "samples_per_edge 100" in capsys.readouterr().out
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert f"{TYPO}: planner.sample_per_edge: unknown key ignored; did you mean 'samples_per_edge'?" in warned
+
+
+def test_check_strict_refuses_an_unknown_key(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", "--strict", str(TYPO)]) == EXIT_BAD_INPUT
+    out, err = capsys.readouterr()
+    assert out == ""
+    _one_line_error(err, TYPO)
+    assert f"{TYPO}: author: unknown key" in err
+
+
+def test_strict_scenario_options_of_solve_validate_simulate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    typo = tmp_path / "pick-typo.toml"
+    typo.write_text(PICK.read_text().replace("[object]", "[object]\nmas = 5", 1))
+    plan = REPO / "tests" / "data" / "spec" / "pick-plan.json"
+    runs = [["solve", str(typo), "--out", str(tmp_path / "plan.json"), "-q"],
+            ["validate", str(plan), "--scenario", str(typo)]]
+    if "simulate" in COMMANDS:
+        runs.append(["simulate", str(plan), "--scenario", str(typo)])
+    for args in runs:
+        assert main([args[0], "--strict", *args[1:]]) == EXIT_BAD_INPUT, args
+        out, err = capsys.readouterr()
+        assert out == "", args
+        _one_line_error(err, typo)
+        assert f"{typo}: object.mas: unknown key" in err and "did you mean 'mass'?" in err
+    assert not (tmp_path / "plan.json").exists()
+
+
+def test_validate_ignores_an_unknown_key_without_strict(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    extended = tmp_path / "pick-extended.toml"
+    extended.write_text(PICK.read_text().replace("[object]", "[object]\ncolour = 'red'", 1))
+    plan = REPO / "tests" / "data" / "spec" / "pick-plan.json"
+    assert main(["validate", str(plan), "--scenario", str(extended)]) == EXIT_OK
+    assert "\nvalid: " in capsys.readouterr().out  # after the warning that the sha256 differs

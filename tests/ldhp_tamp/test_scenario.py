@@ -454,3 +454,67 @@ def test_overlap_rule_is_the_eroded_intersection(depth: float) -> None:
     elif depth >= 2.1:
         with pytest.raises(ScenarioError, match="task.start: the object at .* overlaps solid"):
             load_scenario_string(text, check_planner=False)
+
+
+# --------------------------------------------------------------------------- strict mode
+
+_MASS_TYPO = _BLOCK.replace("[object]", "[object]\nmas = 5", 1)
+
+
+def test_a_misspelt_key_is_ignored_by_default(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING, logger="ldhp_tamp.scenario"):
+        s = load_scenario_string(_MASS_TYPO, "typo.toml", check_planner=False)
+    assert s.world.object.mass == 1.0  # the default: the typo did not set it
+    assert "object.mas: unknown key ignored; did you mean 'mass'?" in caplog.text
+
+
+def test_strict_refuses_a_misspelt_key_naming_file_key_and_guess() -> None:
+    with pytest.raises(ScenarioError) as info:
+        load_scenario_string(_MASS_TYPO, "typo.toml", check_planner=False, strict=True)
+    assert (info.value.path, info.value.key) == ("typo.toml", "object.mas")
+    assert str(info.value).startswith("typo.toml: object.mas: unknown key")
+    assert "did you mean 'mass'?" in str(info.value)
+
+
+def _with(text: str, after: str | None, line: str) -> str:
+    """``text`` with ``line`` inserted after the line ``after`` (at the top if ``None``)."""
+    if after is None:
+        return line + "\n" + text
+    assert text.count(after + "\n") == 1, after
+    return text.replace(after + "\n", f"{after}\n{line}\n")
+
+
+@pytest.mark.parametrize(("after", "line", "key"), [
+    (None, 'author = "a researcher"', "author"),
+    ("[object]", 'colour = "red"', "object.colour"),
+    ("[task]", "goal_relase = true", "task.goal_relase"),
+    ("[friction]", "environment_edges = [{ edge = \"e1\", mu = 0.5, note = \"wet\" }]",
+     "friction.environment_edges[0].note"),
+    ("gripper = 0.6", "\n[planner]\nsample_per_edge = 50", "planner.sample_per_edge"),
+    ("gripper = 0.6", "\n[render]\nscale = 2", "render"),
+])
+def test_strict_refuses_an_unknown_key_anywhere(after: str | None, line: str, key: str) -> None:
+    text = _with(_BLOCK, after, line)
+    load_scenario_string(text, "extra.toml", check_planner=False)  # the default: ignored
+    with pytest.raises(ScenarioError) as info:
+        load_scenario_string(text, "extra.toml", check_planner=False, strict=True)
+    assert info.value.key == key and info.value.problem.startswith("unknown key")
+
+
+def test_strict_refuses_a_key_of_the_other_gripper_model() -> None:
+    text = _BLOCK.replace('model = "two-point"', 'model = "two-point"\nopening = [0, 100]', 1)
+    assert 'opening = [0, 100]' in text
+    load_scenario_string(text, check_planner=False)
+    with pytest.raises(ScenarioError, match=r"gripper.opening: unknown key \(not used by the two-point model\)"):
+        load_scenario_string(text, check_planner=False, strict=True)
+
+
+@pytest.mark.parametrize("path", [*sorted(resources.scenarios_dir().glob("*.toml")),
+                                  *sorted((DATA / "good").glob("*.toml"))],
+                         ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_strict_accepts_every_file_that_uses_only_the_formats_keys(path: Path) -> None:
+    if path.name == "extra_keys.toml":
+        with pytest.raises(ScenarioError, match="unknown key"):
+            load_scenario(path, strict=True)
+    else:
+        assert load_scenario(path, strict=True).name

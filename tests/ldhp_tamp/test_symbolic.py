@@ -529,3 +529,23 @@ def test_grounding_with_the_indexed_filter_makes_the_same_operators(ldhp):
             tasks[name] = sorted((op.name, sorted(op.preconditions), sorted(op.add_effects), sorted(op.del_effects))
                                  for op in task.operators)
         assert tasks["regex"] == tasks["indexed"] and len(tasks["regex"]) > 5
+
+
+# --------------------------------------------------------------------------- load-time checks
+
+
+def test_load_checked_domain_makes_every_check_solve_makes_before_searching() -> None:
+    from ldhp_tamp.primitives import REGISTRY
+    from ldhp_tamp.symbolic import load_checked_domain
+
+    assert load_checked_domain("ldhp", "pyperplan", REGISTRY).info.name == "ldhp"
+    with pytest.raises(DomainError, match="syntax-error.pddl:42:3: PDDL error"):
+        load_checked_domain(DATA / "syntax-error.pddl", "pyperplan", REGISTRY)
+    with pytest.raises(DomainError, match="action 'juggle' has no registered implementation"):
+        load_checked_domain(DATA / "no-implementation.pddl", "pyperplan", REGISTRY)
+    with pytest.raises(DomainError, match="action 'tip' has no registered implementation"):
+        load_checked_domain("ldhp", "pyperplan", PrimitiveRegistry())
+    with pytest.raises(EngineError, match="engine 'pyperplan' cannot solve domain"):
+        load_checked_domain(DATA / "costs.pddl", "pyperplan", REGISTRY)
+    with pytest.raises(EngineError, match="unknown planning engine 'no-such-engine'"):
+        load_checked_domain("ldhp", "no-such-engine", REGISTRY)
