@@ -352,9 +352,12 @@ def build_xml(world: World, options: ModelOptions = ModelOptions()) -> tuple[str
     b = _Builder(o)
     root = b.root
     ET.SubElement(root, "compiler", angle="radian", inertiafromgeom="false")
-    ET.SubElement(root, "option", timestep=_fmt(o.timestep_s), gravity="0 0 -9.81", cone="elliptic",
-                  impratio=_fmt(o.impratio), integrator="implicitfast", solver="Newton",
-                  iterations="100", tolerance="1e-10")
+    option = ET.SubElement(root, "option", timestep=_fmt(o.timestep_s), gravity="0 0 -9.81", cone="elliptic",
+                           impratio=_fmt(o.impratio), integrator="implicitfast", solver="Newton",
+                           iterations="100", tolerance="1e-10")
+    # several contacts per convex pair (a face on a face touches at its corners): an enable
+    # flag before MuJoCo 3.2, the default (and still accepted) since
+    ET.SubElement(option, "flag", multiccd="enable")
     world_body = ET.SubElement(root, "worldbody")
 
     # -- solids (static)
