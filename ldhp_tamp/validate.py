@@ -1,4 +1,4 @@
-"""The plan validator: the seven rules of ``ldhp-plan/1`` (``shared/spec/plan.md``).
+"""The plan validator: rules 0-9 of ``ldhp-plan/1`` (``shared/spec/plan.md``).
 
 :func:`validate_plan` checks a :class:`~ldhp_tamp.plan.Plan` against a
 :class:`~ldhp_tamp.scenario.Scenario` from the two values alone (no planner internals),
@@ -6,10 +6,16 @@ with the spec's tolerances (:data:`~geometry.tolerances.VALIDATE_TOL` for contac
 position, :data:`~geometry.tolerances.VALIDATE_TOL_DEG` for angles). The choices the spec
 leaves open are listed in ``docs/design/validation.md``; in short:
 
+0. **Known primitives**: each step's primitive is an action of the scenario's domain
+   (matched case-insensitively, as PDDL names are) and its family is the action's
+   (MoveObject iff an effect changes ``(at ?s)``), read by the light
+   :mod:`ldhp_tamp.domain_info` (no unified-planning). An unknown domain file is bad
+   input (:class:`~ldhp_tamp.errors.DomainError`), not a broken rule.
 1. **Ends** also covers the file (``ldhp-plan/1``, status ``solved``, at least one step,
    no empty step) and the joins between steps. Under ``goal_release`` a finger *touches*
    the object if it declares a contact or lies within 1 mm of it.
-2. **Continuity** is checked over the whole waypoint sequence, so across step joins too.
+2. **Continuity** is checked over the whole waypoint sequence, so across step joins too;
+   every width lies in the gripper's ``spacing``/``opening`` range within 1 mm.
 3. **No penetration** uses the overlap rule of :mod:`geometry.collision` per solid; a
    finger and the palm are one rigid hand and are not tested against each other.
 4. **Real finger contacts**: distances to the object's boundary and the finger's boundary.
@@ -19,6 +25,16 @@ leaves open are listed in ``docs/design/validation.md``; in short:
 6. **Adjust-grasp**: the object pose within 1 mm and 1 degree of the step's first one.
 7. **Support**: every contact within 1 mm (and every declared finger contact) with its
    full Coulomb cone, tested by :func:`geometry.mechanics.feasible_batch` at margin 0.
+8. **Support with the motion's contact modes**: rule 7's contacts, each SLIDING (the
+   one cone edge opposing the slip) when its two bodies' material points drift apart
+   tangentially by more than :data:`SLIP_TOL` = 0.1 mm over the motion to the next
+   waypoint (over the whole sequence, as rule 2), every other one STICKING.
+9. **Finger force limit** (with the gripper's ``max_force``): rule 8's contacts (rule
+   7's at the last waypoint) hold the weight ``mass x 9.81 N`` with every finger's total
+   normal force at most ``max_force``, by the LP :func:`geometry.mechanics.bounded_support`.
+
+Rules 7, 8 and 9 are nested (each checks a subset of the previous one's forces), so a
+waypoint is reported under the first of them it breaks only.
 
 A run of consecutive waypoints of one step that break the same check the same way is one
 :class:`Violation` (``waypoint`` .. ``last_waypoint``, the message quoting the worst one),
