@@ -256,10 +256,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if report.final_position_error_mm is not None:
             print(f"  final error to the goal: {report.final_position_error_mm:.2f} mm, "
                   f"{report.final_angle_error_deg:.2f} deg")
-        force = f"{report.max_force_n:g} N" + (" (default: the scenario gives no max_force)"
-                                               if report.max_force_default else "")
+        if report.max_force_n is None:
+            force = "rigid fingers (fixed width)"
+        else:
+            force = f"finger force cap {report.max_force_n:g} N" + (
+                " (default: the scenario gives no max_force)" if report.max_force_default else "")
         print(f"  simulated {report.simulated_s:.1f} s in {report.wall_s:.1f} s at {options.speed_mm_s:g} mm/s; "
-              f"finger force cap {force}")
+              f"{force}")
     if args.out:
         print(f"wrote {write_report(report, args.out, args.plan, args.scenario, options)}")
     if args.gif:

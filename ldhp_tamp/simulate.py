@@ -171,8 +171,9 @@ class SimulationReport:
         Distance of ``final_pose`` to the scenario's goal.
     simulated_s, wall_s : float
         Simulated time (the start hold and settle included) and wall-clock time.
-    max_force_n : float
-        The finger force cap used; ``max_force_default`` when it is not the scenario's.
+    max_force_n : float or None
+        The finger drives' force cap; ``None`` for a fixed width (rigid fingers, no cap);
+        ``max_force_default`` when it is not the scenario's.
     """
 
     status: SimStatus
@@ -509,8 +510,9 @@ def simulate_plan(plan: Plan, scenario: Scenario, options: SimOptions = SimOptio
             why = "the simulation went unstable in the final settle"
     wall = time.perf_counter() - wall0
     common = dict(records=tuple(records), final_pose=final_pose, final_position_error_mm=fpos,
-                  final_angle_error_deg=fang, simulated_s=run.time, wall_s=wall, max_force_n=sim.max_force,
-                  max_force_default=not sim.max_force_from_scenario)
+                  final_angle_error_deg=fang, simulated_s=run.time, wall_s=wall,
+                  max_force_n=sim.max_force if sim.variable_width else None,
+                  max_force_default=sim.variable_width and not sim.max_force_from_scenario)
     if diverged is None:
         assert fpos is not None and fang is not None
         reason = (f"every waypoint within {options.position_tol_mm:g} mm / {options.angle_tol_deg:g} deg "
@@ -593,7 +595,7 @@ def write_report(report: SimulationReport, path: str | Path, plan: str = "", sce
 
 
 def write_gif(report: SimulationReport, plan: Plan, scenario: Scenario, path: str | Path,
-              max_frames: int = 100, frame_ms: int = 80, width_px: int = 640) -> int:
+              max_frames: int = 60, frame_ms: int = 100, width_px: int = 640) -> int:
     """Draw the simulated run (object, fingers at their simulated poses; the planned object
     as a dashed outline; the goal in green) as an animated GIF, one frame per recorded
     waypoint, at most ``max_frames``. Returns the number of frames.
