@@ -69,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
         else:
             where = "-"
         rows.append((name, str(len(plan.steps)), str(len(plan.waypoints)), f"{report.simulated_s:.1f}",
-                     f"{report.wall_s:.1f}", report.status.value, where, report.reason))
+                     f"{report.wall_s:.1f}", report.status.value, where,
+                     "a failed plan (no steps)" if report.status is SimStatus.NOT_SIMULATED else report.reason))
         print(f"[simulate_bench] {name}: {report.status.value} {where} ({report.wall_s:.1f} s)",
               file=sys.stderr, flush=True)
     head = ("plan", "steps", "waypoints", "simulated s", "wall s", "verdict", "diverging step", "reason")
