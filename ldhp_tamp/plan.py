@@ -1,4 +1,4 @@
-"""Plans (``ldhp-plan/1``, see ``shared/spec/plan.md``): the model, reading and writing.
+"""Plans (``ldhp-plan/1``, see ``docs/formats/plan.md``): the model, reading and writing.
 
 The last stage of the pipeline: what the planner produces, what the validator checks and
 what other tools read. Inside the package poses are :class:`~geometry.poses.Pose` values

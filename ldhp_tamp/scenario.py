@@ -1,4 +1,4 @@
-"""Scenario loading (``ldhp-scenario/1``, see ``shared/spec/scenario.md``).
+"""Scenario loading (``ldhp-scenario/1``, see ``docs/formats/scenario.md``).
 
 Stage 1 of the pipeline: a TOML file becomes an immutable :class:`Scenario` holding the
 geometric :class:`~geometry.world.World` and the task. Every refusal of the spec raises

@@ -38,7 +38,7 @@ REFUSED_DOMAINS: dict[str, str] = {
 #: Domain files that load (used by other tests).
 USABLE_DOMAINS = {"no-air-move.pddl"}
 
-#: The refusals that shared/spec/scenario.md lists ("What a loader must refuse"), each with
+#: The refusals the format requires (docs/formats/scenario.md, "What the loader refuses"), each with
 #: the files of tests/data/scenarios/bad/ that exercise it.
 SPEC_REFUSALS: dict[str, tuple[str, ...]] = {
     "unknown format": ("unknown_format.toml",),

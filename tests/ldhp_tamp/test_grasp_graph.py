@@ -28,7 +28,7 @@ from ldhp_tamp.scenario import Scenario, load_scenario, load_scenario_string
 from ldhp_tamp.streams import PosePath
 from ldhp_tamp.validate import validate_plan
 
-#: A copy of ../shared/spec/examples/pick.toml (tests/ldhp_tamp/test_spec_copies.py).
+#: A copy of docs/formats/examples/pick.toml (tests/ldhp_tamp/test_spec_copies.py).
 PICK_TOML = Path(__file__).resolve().parents[1] / "data" / "spec" / "pick.toml"
 K = 10
 

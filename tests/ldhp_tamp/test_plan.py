@@ -26,8 +26,7 @@ from ldhp_tamp.plan import (
     write_plan,
 )
 
-#: The spec's examples: ``shared/`` sits beside the repository (``../shared`` from its root).
-# Copies of ../shared/spec/examples (tests/ldhp_tamp/test_spec_copies.py keeps them equal).
+#: The format's examples: copies of docs/formats/examples (test_spec_copies.py keeps them equal).
 EXAMPLES = Path(__file__).resolve().parents[1] / "data" / "spec"
 VALID = EXAMPLES / "pick-plan.json"
 

@@ -24,8 +24,7 @@ from ldhp_tamp.plan import Family, Plan, PlanStatus, Step, Waypoint, read_plan
 from ldhp_tamp.scenario import Scenario, load_scenario, load_scenario_string
 from ldhp_tamp.validate import RULES, ValidationReport, format_violation, validate_plan
 
-#: The spec's examples: ``shared/`` sits beside the repository (``../shared`` from its root).
-# Copies of ../shared/spec/examples (tests/ldhp_tamp/test_spec_copies.py keeps them equal).
+#: The format's examples: copies of docs/formats/examples (test_spec_copies.py keeps them equal).
 EXAMPLES = Path(__file__).resolve().parents[1] / "data" / "spec"
 BROKEN = Path(__file__).resolve().parents[1] / "data" / "plans"
 PICK_TOML = EXAMPLES / "pick.toml"
