@@ -84,7 +84,7 @@ class Waypoint:
     object : Pose
         Object pose (world, radians).
     gripper : Pose
-        Gripper frame pose (world, radians), see scenario.md "The gripper frame".
+        Gripper frame pose (world, radians), see docs/formats/scenario.md, "The gripper frame".
     width : float
         Spacing (two-point) or opening (polyline), mm.
     finger_contacts : tuple
