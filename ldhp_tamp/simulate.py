@@ -109,7 +109,7 @@ class SimOptions:
     start_hold_s: float = 0.3
     settle_s: float = 1.0
     preload_mm: float = 2.5
-    preload_single_contacts: bool = True
+    preload_single_contacts: bool = False
     position_tol_mm: float = 15.0
     angle_tol_deg: float = 15.0
     goal_position_tol_mm: float = 10.0
