@@ -110,7 +110,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if not out.resolve().parent.is_dir():  # before the search, not after it
         raise InputError(f"{out}: --out: no such directory: {out.resolve().parent}")
     options = SolveOptions(engine=args.engine, seed=args.seed, timeout=args.timeout,
-                           emit_pddl=Path(args.emit_pddl) if args.emit_pddl else None)
+                           emit_pddl=Path(args.emit_pddl) if args.emit_pddl else None,
+                           simulate=args.simulate)
     quiet = args.quiet
 
     def progress(msg: str) -> None:
@@ -128,7 +129,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if result.solved:
         print("  primitives: " + " -> ".join(step.primitive for step in result.plan.steps))
         n = sum(len(step.waypoints) for step in result.plan.steps)
-        print(f"  steps: {len(result.plan.steps)}, waypoints: {n} (validated)")
+        print(f"  steps: {len(result.plan.steps)}, waypoints: {n} (validated"
+              + (", executes in simulation)" if args.simulate else ")"))
     else:
         print(f"  reason: {result.reason}")
     print(f"  contact states: {stats.contact_state_nodes}, grasp graph: {stats.grasp_graph_nodes} nodes, "
@@ -335,6 +337,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wall-time budget of the whole solve (both tiers, every engine); when it runs "
                         "out the plan has status 'failed', a reason starting 'timeout' and the "
                         "statistics so far, and the exit status is 1 (default: no limit)")
+    p.add_argument("--simulate", action="store_true",
+                   help="judge every plan found in the physics simulation too (ldhp-tamp simulate): a plan "
+                        "that diverges is fed back like one that fails validation and the search goes on")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
     _add_strict(p)
 

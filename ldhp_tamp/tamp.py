@@ -34,7 +34,7 @@ from ldhp_tamp.errors import TimeBudgetExceeded
 from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanStatus
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
-from ldhp_tamp.primitives import REGISTRY, Family, check_against_domain
+from ldhp_tamp.primitives import REGISTRY, Family
 from ldhp_tamp.primitives.registry import Sequel, Transition
 from ldhp_tamp.scenario import Scenario
 from ldhp_tamp.streams import PathSearch, PosePath, StreamStats
@@ -170,10 +170,8 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     rng = np.random.default_rng(seed)
     say = progress or (lambda _msg: None)
 
-    domain = symbolic.load_domain(options.domain if options.domain is not None
-                                  else settings.domain_path or settings.domain)
-    check_against_domain(domain.info, REGISTRY)
-    symbolic.check_engine(domain, engine)
+    domain = symbolic.load_checked_domain(options.domain if options.domain is not None
+                                          else settings.domain_path or settings.domain, engine, REGISTRY)
     # The planner plans with every coefficient scaled by (1 - friction_margin); its plans
     # are validated (and simulated) with the scenario's own coefficients.
     world = scenario.world
