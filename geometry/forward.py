@@ -57,6 +57,10 @@ MAX_CONTACTS = 6
 
 _FREE, _STICK, _SLIDE = 0, 1, 2
 
+#: An assignment fixes the twist when its equations' smallest singular value is at least
+#: this fraction of the largest (nearer singular: a mechanism, not enumerated).
+_RANK_TOL = 1e-6
+
 
 @dataclass(frozen=True, eq=False)
 class ForwardCheck:
@@ -92,7 +96,8 @@ def _rows(points: FloatArray, normals: FloatArray, com: FloatArray) -> tuple[Flo
 
 def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, present: ArrayLike,
                         other_velocity: ArrayLike, com: ArrayLike, length_scale: float,
-                        planned_twist: ArrayLike, *, relative_tol: float = 1e-3) -> ForwardCheck:
+                        planned_twist: ArrayLike, *, relative_tol: float = 1e-3,
+                        same_tol: float = 0.02) -> ForwardCheck:
     """Whether the commanded motion admits another consistent object motion.
 
     Parameters
@@ -113,6 +118,9 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
         The planned object twist ``(v_x, v_y, omega)`` about the COM.
     relative_tol : float
         Velocities below ``relative_tol`` times the motion's scale are zero.
+    same_tol : float
+        A twist within ``same_tol`` times the motion's scale of the planned one (per
+        component, rotations times ``length_scale``) is the planned motion.
 
     Returns
     -------
@@ -175,7 +183,7 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
         y = np.concatenate([wn[idx][:, stick | slide], wt[idx][:, stick]], axis=1)
         # least squares per instance; rank must be 3
         sv = np.linalg.svd(A, compute_uv=False)
-        ok = sv[:, 2] > 1e-9 * np.maximum(sv[:, 0], 1e-300)
+        ok = sv[:, 2] > _RANK_TOL * np.maximum(sv[:, 0], 1e-300)
         if not ok.any():
             continue
         idx, A, y = idx[ok], A[ok], y[ok]
@@ -188,7 +196,7 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
         cons = resid <= t0
         cons &= ~((r_n < -t0[:, None]) & lv).any(axis=1)  # nothing penetrates
         cons &= ~(slide[None, :] & (np.abs(r_t) <= t0[:, None])).any(axis=1)  # sliding slides
-        differs = (np.abs((xi - plan[idx]) * weights) > t0[:, None]).any(axis=1)
+        differs = (np.abs((xi - plan[idx]) * weights) > same_tol * scale[idx, None]).any(axis=1)
         cons &= differs
         if not cons.any():
             continue

@@ -31,6 +31,7 @@ from ldhp_tamp import budget, symbolic
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
 from ldhp_tamp.errors import TimeBudgetExceeded
+from ldhp_tamp.executability import forward_check
 from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanStatus
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
@@ -374,7 +375,9 @@ class Verdict:
 class _Judge:
     """Decides whether a grasp plan's steps make a plan that executes: the validator's
     rules 0-9 on every output waypoint (the motion's contact modes, the force limit),
-    with the scenario's own friction; then, when asked, the physics simulation."""
+    with the scenario's own friction; the forward problem (the commanded finger motion
+    makes the planned object motion and no other, :mod:`ldhp_tamp.executability`); then,
+    when asked, the physics simulation."""
 
     def __init__(self, scenario: Scenario, engine: str, simulate: bool, c: _Counters, clock: _Clock):
         self.scenario, self.engine, self.simulate, self.c, self.clock = scenario, engine, simulate, c, clock
@@ -392,6 +395,14 @@ class _Judge:
                      len(report.violations), step, steps[step].primitive, first.message)
             return Verdict(step, f"the plan breaks rule {first.rule} at step {step} ({steps[step].primitive}): "
                                  f"{first.message}")
+        forward = forward_check(plan, self.scenario)
+        if not forward.ok:
+            assert forward.step is not None
+            self.c.judge_rejections += 1
+            log.info("the bottom tier's plan is ambiguous at step %d (%s): %s", forward.step,
+                     steps[forward.step].primitive, forward.reason)
+            return Verdict(forward.step, f"the commanded motion of step {forward.step} "
+                                         f"({steps[forward.step].primitive}) is ambiguous at {forward.reason}")
         if not self.simulate:
             return Verdict()
         from ldhp_tamp.simulate import simulate_plan  # MuJoCo loads only when asked for

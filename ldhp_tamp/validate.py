@@ -1,4 +1,4 @@
-"""The plan validator: rules 0-9 of ``ldhp-plan/1`` (``shared/spec/plan.md``).
+"""The plan validator: rules 0-9 of ``ldhp-plan/1`` (``docs/formats/plan.md``).
 
 :func:`validate_plan` checks a :class:`~ldhp_tamp.plan.Plan` against a
 :class:`~ldhp_tamp.scenario.Scenario` from the two values alone (no planner internals),
@@ -63,7 +63,8 @@ from ldhp_tamp.errors import DomainError
 from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStatus
 from ldhp_tamp.scenario import Scenario, find_domain
 
-__all__ = ["RULES", "SLIP_TOL", "ValidationReport", "Violation", "domain_actions", "format_violation", "validate_plan"]
+__all__ = ["RULES", "SLIP_TOL", "PlanArrays", "PlanContacts", "ValidationReport", "Violation", "domain_actions",
+           "finger_offsets", "format_violation", "plan_contacts", "rotate_vectors", "validate_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -167,7 +168,7 @@ def format_violation(v: Violation, plan: Plan) -> str:
 
 
 @dataclass(frozen=True, eq=False)
-class _Flat:
+class PlanArrays:
     """All waypoints of the non-empty steps, in order, as arrays (radians, mm)."""
 
     obj: FloatArray  # (W, 3)
@@ -179,7 +180,7 @@ class _Flat:
     local: IntArray  # (W,) waypoint index within its step
 
     @classmethod
-    def of(cls, plan: Plan) -> "_Flat":
+    def of(cls, plan: Plan) -> "PlanArrays":
         rows = [(i, j, w) for i, s in enumerate(plan.steps) for j, w in enumerate(s.waypoints)]
         n = len(rows)
         obj = np.array([w.object.as_array() for _, _, w in rows], dtype=float).reshape(n, 3)
@@ -198,9 +199,9 @@ class _Flat:
     def __len__(self) -> int:
         return int(self.step.shape[0])
 
-    def take(self, rows: slice) -> "_Flat":
-        """The waypoints ``rows`` as a smaller :class:`_Flat`."""
-        return _Flat(self.obj[rows], self.grip[rows], self.width[rows], self.contacts[rows],
+    def take(self, rows: slice) -> "PlanArrays":
+        """The waypoints ``rows`` as a smaller :class:`PlanArrays`."""
+        return PlanArrays(self.obj[rows], self.grip[rows], self.width[rows], self.contacts[rows],
                      self.declared[rows], self.step[rows], self.local[rows])
 
     def step_slice(self, i: int) -> slice:
@@ -223,7 +224,7 @@ def _runs(bad: BoolArray, step: IntArray) -> Iterator[tuple[int, int]]:
 class _Findings:
     """Collects violations; groups runs of bad waypoints into one violation each."""
 
-    def __init__(self, flat: _Flat):
+    def __init__(self, flat: PlanArrays):
         self.flat = flat
         self.violations: list[Violation] = []
 
@@ -286,7 +287,7 @@ def _to_frame(poses: FloatArray, points: FloatArray) -> FloatArray:
     return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
 
 
-def _rotate(poses: FloatArray, vectors: FloatArray) -> FloatArray:
+def rotate_vectors(poses: FloatArray, vectors: FloatArray) -> FloatArray:
     """Body directions (..., 2) (broadcast against B) into the world, for poses (B, 3)."""
     v = np.asarray(vectors, dtype=float)
     shape = (-1,) + (1,) * (v.ndim - 2)
@@ -295,7 +296,7 @@ def _rotate(poses: FloatArray, vectors: FloatArray) -> FloatArray:
     return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
-def _finger_offsets(width: FloatArray) -> FloatArray:
+def finger_offsets(width: FloatArray) -> FloatArray:
     """(B, 2, 2): the shift of finger 1 and finger 2 in the gripper frame."""
     z = np.zeros_like(width)
     return np.stack([np.stack([-width / 2, z], -1), np.stack([width / 2, z], -1)], axis=1)
@@ -315,12 +316,12 @@ def _finger_boundary(world: World, grip: FloatArray, width: FloatArray, points: 
     finger's outward normals there (two-point: the radial direction; polyline: every
     finger edge within tolerance of the point)."""
     g = world.gripper
-    off = _finger_offsets(width)
+    off = finger_offsets(width)
     local = _to_frame(grip, points) - off  # in each finger's own frame (B, 2, 2)
     if isinstance(g, TwoPointGripper):
         rho = np.linalg.norm(local, axis=-1)
         radial = local / np.where(rho > 0, rho, 1.0)[..., None]
-        return _FingerBoundary(np.abs(rho - g.finger_radius), _rotate(grip, radial)[:, :, None, :],
+        return _FingerBoundary(np.abs(rho - g.finger_radius), rotate_vectors(grip, radial)[:, :, None, :],
                                (rho > 0)[..., None])
     assert isinstance(g, PolylineGripper)
     dist = np.empty(points.shape[:2])
@@ -328,7 +329,7 @@ def _finger_boundary(world: World, grip: FloatArray, width: FloatArray, points: 
     for k, poly in enumerate((g.mirrored_finger, g.finger)):
         d = segment_distances(local[:, k], poly.edges)[0]  # (B, E)
         dist[:, k] = d.min(axis=1)
-        normals.append(_rotate(grip, np.broadcast_to(poly.normals, (grip.shape[0],) + poly.normals.shape)))
+        normals.append(rotate_vectors(grip, np.broadcast_to(poly.normals, (grip.shape[0],) + poly.normals.shape)))
         near.append(d <= _TOL)
     return _FingerBoundary(dist, np.stack(normals, axis=1), np.stack(near, axis=1))
 
@@ -344,7 +345,7 @@ def _solid_label(env: Environment, k: int) -> str:
 
 
 @dataclass(frozen=True, eq=False)
-class _Contacts:
+class PlanContacts:
     """The contacts present at each waypoint, as candidate normals (force directions on
     the object) at points, each with a friction coefficient; ``on`` marks those present."""
 
@@ -356,7 +357,7 @@ class _Contacts:
     finger: IntArray  # (C,) the finger (0, 1) of a finger candidate, -1 for the environment
 
 
-def _contacts(world: World, flat: _Flat) -> _Contacts:
+def plan_contacts(world: World, flat: PlanArrays) -> PlanContacts:
     """Every contact of rule 7 at every waypoint, with its candidate normals.
 
     - object vertex ``v_i`` within tolerance of environment edge ``e_j``: at the vertex,
@@ -392,7 +393,7 @@ def _contacts(world: World, flat: _Flat) -> _Contacts:
     # Environment vertices on object edges.
     ev_local = _to_frame(flat.obj, np.broadcast_to(env.vertices, (b, m, 2)))  # (B, M, 2)
     d_ev = segment_distances(ev_local, poly.edges)[0]  # (B, M, N)
-    inward = _rotate(flat.obj, np.broadcast_to(-poly.normals, (b, n, 2)))  # (B, N, 2)
+    inward = rotate_vectors(flat.obj, np.broadcast_to(-poly.normals, (b, n, 2)))  # (B, N, 2)
     mu_ev = np.array([[fr.environment_mu("l", i, "ve", j, world_edges=env.vertex_edges, n_object=n)
                        for i in range(n)] for j in range(m)])
     add(np.repeat(env.vertices, n, axis=0), np.tile(inward, (1, m, 1)), mu_ev.reshape(-1),
@@ -422,7 +423,7 @@ def _contacts(world: World, flat: _Flat) -> _Contacts:
             add(p[:, k, None, :], fb.normals[:, k], mu_v[nearest_vertex[:, k]][:, None] * np.ones(e),
                 on_finger, [label] * e, k)
 
-    return _Contacts(np.concatenate(pts, 1), np.concatenate(nrm, 1), np.concatenate(mus, 1),
+    return PlanContacts(np.concatenate(pts, 1), np.concatenate(nrm, 1), np.concatenate(mus, 1),
                      np.concatenate(ons, 1), tuple(labels), np.array(owner, dtype=np.int64))
 
 
@@ -437,14 +438,14 @@ SLIP_TOL = 0.1
 @dataclass(frozen=True, eq=False)
 class _Motion:
     """The contact modes of the motion from each waypoint to the next (rule 8), per
-    contact candidate of :class:`_Contacts`."""
+    contact candidate of :class:`PlanContacts`."""
 
     sliding: BoolArray  # (B, C) present and drifting more than SLIP_TOL tangentially
     slide_dirs: FloatArray  # (B, C, 2) the object's tangential slip direction where sliding
     drift: FloatArray  # (B, C) tangential drift along t = (-n_y, n_x) (mm, object relative to the other body)
 
 
-def _motion(world: World, flat: _Flat, rows: IntArray, c: _Contacts) -> _Motion:
+def _motion(world: World, flat: PlanArrays, rows: IntArray, c: PlanContacts) -> _Motion:
     """Rule 8's contact modes at waypoints ``rows`` (global indices) of the contacts
     ``c`` present there, for the motion to the next waypoint (none after the last).
 
@@ -459,7 +460,7 @@ def _motion(world: World, flat: _Flat, rows: IntArray, c: _Contacts) -> _Motion:
     d = mechanics.pose_displacements(c.points, flat.obj[rows], flat.obj[nxt])[0]  # (B, C, 2)
     if (c.finger >= 0).any():
         dg = mechanics.pose_displacements(c.points, flat.grip[rows], flat.grip[nxt])[0]
-        shift = _rotate(flat.grip[nxt], _finger_offsets(flat.width[nxt] - flat.width[rows]))  # (B, 2, 2)
+        shift = rotate_vectors(flat.grip[nxt], finger_offsets(flat.width[nxt] - flat.width[rows]))  # (B, 2, 2)
         finger = c.finger >= 0
         d = d - np.where(finger[None, :, None], dg + shift[:, np.clip(c.finger, 0, 1), :], 0.0)
     t = np.stack([-c.normals[..., 1], c.normals[..., 0]], axis=-1)
@@ -482,7 +483,7 @@ class _Support:
     force_checks: int  # waypoints that needed the LP
 
 
-def _support(world: World, flat: _Flat, max_force: float | None = None) -> _Support:
+def _support(world: World, flat: PlanArrays, max_force: float | None = None) -> _Support:
     """Rules 7, 8 and 9 at every waypoint.
 
     Rule 7: every contact candidate is a STICKING contact (full cone) of
@@ -503,7 +504,7 @@ def _support(world: World, flat: _Flat, max_force: float | None = None) -> _Supp
     scale = world.object.length_scale
     for start in range(0, n_wp, _BLOCK):
         block = slice(start, min(start + _BLOCK, n_wp))
-        c = _contacts(world, flat.take(block))
+        c = plan_contacts(world, flat.take(block))
         mo = _motion(world, flat, np.arange(block.start, block.stop), c)
         count = c.on.sum(axis=1)
         for kc in np.unique(count[count > 0]):
@@ -574,7 +575,7 @@ def _rule0(plan: Plan, domain: DomainActions, out: _Findings) -> None:
                     f"{family.value} in {where}")
 
 
-def _rule1(plan: Plan, scenario: Scenario, flat: _Flat, out: _Findings) -> None:
+def _rule1(plan: Plan, scenario: Scenario, flat: PlanArrays, out: _Findings) -> None:
     first, last = 0, len(flat) - 1
     gap = _pose_differs(flat.obj[first], scenario.start.as_array())
     if gap:
@@ -619,7 +620,7 @@ def _rule1(plan: Plan, scenario: Scenario, flat: _Flat, out: _Findings) -> None:
             out.add(1, int(flat.step[i]), 0, f"does not join step {prev}'s last waypoint: " + "; ".join(problems))
 
 
-def _touching(world: World, flat: _Flat, i: int) -> BoolArray:
+def _touching(world: World, flat: PlanArrays, i: int) -> BoolArray:
     """(2,) whether each finger touches the object at waypoint ``i``: a declared contact,
     or the finger within tolerance of the object."""
     obj = shapely.Polygon(transform_points(flat.obj[i:i + 1], world.object.polygon.vertices)[0])
@@ -632,7 +633,7 @@ def _touching(world: World, flat: _Flat, i: int) -> BoolArray:
     return flat.declared[i] | (np.asarray(gaps) <= _TOL)
 
 
-def _rule2(world: World, flat: _Flat, out: _Findings) -> None:
+def _rule2(world: World, flat: PlanArrays, out: _Findings) -> None:
     def moves(points: FloatArray) -> FloatArray:
         d = np.zeros(points.shape[0])
         if points.shape[0] > 1:
@@ -655,7 +656,7 @@ def _rule2(world: World, flat: _Flat, out: _Findings) -> None:
              f"[{lo:g}, {hi:g}] mm (tolerance {_mm(VALIDATE_TOL)})", outside)
 
 
-def _rule3(world: World, flat: _Flat, out: _Findings) -> None:
+def _rule3(world: World, flat: PlanArrays, out: _Findings) -> None:
     tol = VALIDATE_TOL
     env = world.environment
     has_palm = isinstance(world.gripper, PolylineGripper) and world.gripper.palm is not None
@@ -676,7 +677,7 @@ def _rule3(world: World, flat: _Flat, out: _Findings) -> None:
     out.flag(3, collision.fingers_overlap(world.gripper, flat.width, tol), lambda i: "the fingers penetrate each other")
 
 
-def _rule4(world: World, flat: _Flat, out: _Findings) -> None:
+def _rule4(world: World, flat: PlanArrays, out: _Findings) -> None:
     if not flat.declared.any():
         return
     p = np.nan_to_num(flat.contacts)
@@ -690,7 +691,7 @@ def _rule4(world: World, flat: _Flat, out: _Findings) -> None:
                  f"(tolerance {_mm(VALIDATE_TOL)})", worst)
 
 
-def _rule5(plan: Plan, flat: _Flat, out: _Findings) -> None:
+def _rule5(plan: Plan, flat: PlanArrays, out: _Findings) -> None:
     for s, step in enumerate(plan.steps):
         sl = flat.step_slice(s)
         if step.family is not Family.MOVE_OBJECT or sl.stop == sl.start:
@@ -715,7 +716,7 @@ def _rule5(plan: Plan, flat: _Flat, out: _Findings) -> None:
                      f"the object frame since waypoint {ref} (tolerance {_mm(VALIDATE_TOL)})", drift)
 
 
-def _rule6(plan: Plan, flat: _Flat, out: _Findings) -> None:
+def _rule6(plan: Plan, flat: PlanArrays, out: _Findings) -> None:
     for s, step in enumerate(plan.steps):
         sl = flat.step_slice(s)
         if step.family is not Family.ADJUST_GRASP or sl.stop == sl.start:
@@ -731,12 +732,12 @@ def _rule6(plan: Plan, flat: _Flat, out: _Findings) -> None:
                  f"step's first waypoint (tolerance {_mm(VALIDATE_TOL)}, {VALIDATE_TOL_DEG:g} deg)", severity)
 
 
-def _present(c: _Contacts) -> str:
+def _present(c: PlanContacts) -> str:
     names = sorted({c.labels[j] for j in np.flatnonzero(c.on[0])}, key=lambda s: (s.startswith("finger"), s))
     return f"contacts present: {', '.join(names)}" if names else "the object touches nothing"
 
 
-def _rules789(world: World, flat: _Flat, out: _Findings) -> _Support:
+def _rules789(world: World, flat: PlanArrays, out: _Findings) -> _Support:
     """Rules 7-9. A waypoint that breaks rule 7 breaks rules 8 and 9 too (their cones are
     subsets), and one that breaks rule 8 breaks rule 9: each is reported under the first
     rule it breaks only."""
@@ -744,11 +745,11 @@ def _rules789(world: World, flat: _Flat, out: _Findings) -> _Support:
     sup = _support(world, flat, max_force)
 
     def describe7(i: int) -> str:
-        c = _contacts(world, flat.take(slice(i, i + 1)))
+        c = plan_contacts(world, flat.take(slice(i, i + 1)))
         return f"no contact forces in the friction cones balance the weight ({_present(c)})"
 
     def describe8(i: int) -> str:
-        c = _contacts(world, flat.take(slice(i, i + 1)))
+        c = plan_contacts(world, flat.take(slice(i, i + 1)))
         mo = _motion(world, flat, np.array([i]), c)
         drift: dict[str, float] = {}
         for j in np.flatnonzero(mo.sliding[0]):
@@ -776,7 +777,7 @@ def _rules789(world: World, flat: _Flat, out: _Findings) -> _Support:
 # --------------------------------------------------------------------------------------
 
 
-def _warnings(plan: Plan, scenario: Scenario, flat: _Flat) -> list[str]:
+def _warnings(plan: Plan, scenario: Scenario, flat: PlanArrays) -> list[str]:
     warn = []
     where = scenario.path if scenario.path is not None else scenario.name
     if plan.scenario_sha256 != scenario.sha256:
@@ -807,7 +808,7 @@ def validate_plan(plan: Plan, scenario: Scenario) -> ValidationReport:
         The scenario's domain cannot be found or read (rule 0 needs it).
     """
     world = scenario.world
-    flat = _Flat.of(plan)
+    flat = PlanArrays.of(plan)
     out = _Findings(flat)
     if plan.format != PLAN_FORMAT:
         out.add(1, None, None, f"format is {plan.format!r}, not {PLAN_FORMAT!r}")

@@ -1,0 +1,163 @@
+"""Beyond the plan rules: does the commanded gripper motion make the planned object motion?
+
+The rules of ``ldhp-plan/1`` (:mod:`ldhp_tamp.validate`) ask that balancing forces exist
+at every waypoint, with the motion's contact modes. An executor that commands the
+gripper's *positions* (the paper's: position control with force-triggered events) gets
+whichever object motion the contact mechanics makes of that finger motion; when another
+motion than the planned one is consistent too (a block tipped by one finger on a
+slippery floor slides instead; a finger meant to tip an object leaves it where it is),
+the plan is not executable as written. :func:`forward_check` solves that quasi-static
+forward problem (:func:`geometry.forward.alternative_motions`) over the motion from each
+waypoint to the next, with the contacts rule 7 finds there.
+
+Two fingers of a gripper that closes under force and squeeze the object between them
+(their contact normals oppose each other) hold it as the grip force decides, which the
+force limit (rule 9) and the planner's friction margin govern: waypoints with such a pinch
+are not enumerated (the rigid model would call every pinch ambiguous, its squeeze being
+indeterminate). A fixed-width gripper's rigid fingers squeeze nothing: their waypoints
+are enumerated like any other.
+
+This module reads a plan and a scenario only (like the validator, it never imports the
+planner's search).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from geometry import mechanics
+from geometry.forward import MAX_CONTACTS, alternative_motions
+from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
+from geometry.shapes import FloatArray
+from ldhp_tamp.plan import Plan
+from ldhp_tamp.scenario import Scenario
+from ldhp_tamp.validate import PlanArrays, finger_offsets, plan_contacts, rotate_vectors
+
+__all__ = ["ForwardReport", "forward_check", "SQUEEZE_COS"]
+
+log = logging.getLogger(__name__)
+
+#: Two finger contacts squeeze the object when their normals' dot product is below this
+#: (they push against each other within 60 degrees).
+SQUEEZE_COS = -0.5
+
+#: Motions smaller than this (mm, and radians times the length scale) are no motion.
+_STILL = 1e-6
+
+
+@dataclass(frozen=True)
+class ForwardReport:
+    """Where the commanded motion admits another object motion than the planned one.
+
+    ``ambiguous`` marks waypoints (over the whole plan, in order) at whose motion to the
+    next waypoint it does; ``step`` and ``waypoint`` locate the first (0-based, as the
+    validator's) or are ``None``; ``reason`` says which other motion.
+    """
+
+    ambiguous: BoolArray
+    checked: int
+    step: int | None = None
+    waypoint: int | None = None
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.step is None
+
+
+def _describe(labels: tuple[str, ...], modes: np.ndarray, twist: FloatArray) -> str:
+    names = {mechanics.ContactMode.STICKING: "sticks", mechanics.ContactMode.SLIDING: "slides",
+             mechanics.ContactMode.SEPARATING: "lets go"}
+    what = sorted({f"{labels[j]} {names[int(m)]}" for j, m in enumerate(modes) if int(m) in names})
+    turn = np.degrees(twist[2])
+    return (f"the same finger motion also lets the object move by ({twist[0]:.2f}, {twist[1]:.2f}) mm and "
+            f"{turn:.2f} deg ({', '.join(what) or 'every contact lets go'}), a motion that balances too")
+
+
+def _velocity(pose0: FloatArray, pose1: FloatArray, points: FloatArray) -> FloatArray:
+    """Velocities (B, P, 2) of material points at ``points`` (world, at ``pose0``) under
+    the displacement ``pose0 -> pose1`` (B, 3) taken as the screw it is: a turn ``d``
+    about its fixed point ``c`` gives ``d J (p - c)`` (a point on the turn's centre does
+    not move, as a round finger's centre in a pivot), a pure translation its shift."""
+    d = wrap_angle(pose1[:, 2] - pose0[:, 2])
+    ca, sa = np.cos(d), np.sin(d)
+    # p' = R(d) (p - o0) + o1: the fixed point solves (I - R) c = o1 - R o0
+    ro0 = np.stack([ca * pose0[:, 0] - sa * pose0[:, 1], sa * pose0[:, 0] + ca * pose0[:, 1]], axis=-1)
+    t = pose1[:, :2] - ro0
+    det = (1.0 - ca) ** 2 + sa ** 2
+    turning = np.abs(d) > 1e-12
+    safe = np.where(turning, det, 1.0)
+    cx = ((1.0 - ca) * t[:, 0] - sa * t[:, 1]) / safe
+    cy = (sa * t[:, 0] + (1.0 - ca) * t[:, 1]) / safe
+    rel = points - np.stack([cx, cy], axis=-1)[:, None, :]
+    screw = d[:, None, None] * np.stack([-rel[..., 1], rel[..., 0]], axis=-1)
+    shift = np.broadcast_to((pose1[:, :2] - pose0[:, :2])[:, None, :], screw.shape)
+    return np.where(turning[:, None, None], screw, shift)
+
+
+def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
+    """The forward problem at every waypoint of ``plan`` but the last (see the module
+    docstring). Waypoints with more than :data:`~geometry.forward.MAX_CONTACTS` contacts
+    present are left unchecked (logged)."""
+    world = scenario.world
+    flat = PlanArrays.of(plan)
+    n = len(flat)
+    ambiguous = np.zeros(n, dtype=bool)
+    if n < 2:
+        return ForwardReport(ambiguous, 0)
+    rows = np.arange(n - 1)
+    nxt = rows + 1
+    c = plan_contacts(world, flat.take(slice(0, n - 1)))
+    # planned twist: the COM's displacement and the turn; the other bodies' displacements
+    com0 = transform_points(flat.obj[rows], world.object.com)[:, 0]
+    turn = wrap_angle(flat.obj[nxt, 2] - flat.obj[rows, 2])
+    planned = np.column_stack([_velocity(flat.obj[rows], flat.obj[nxt], com0[:, None, :])[:, 0], turn])
+    finger = c.finger >= 0
+    dg = _velocity(flat.grip[rows], flat.grip[nxt], c.points)  # (B, C, 2)
+    shift = rotate_vectors(flat.grip[nxt], finger_offsets(flat.width[nxt] - flat.width[rows]))  # (B, 2, 2)
+    other = np.where(finger[None, :, None], dg + shift[:, np.clip(c.finger, 0, 1), :], 0.0)
+    L = world.object.length_scale
+    finger_moves = np.where(c.on, np.linalg.norm(other, axis=-1), 0.0).max(axis=1, initial=0.0)
+    moving = (np.abs(planned[:, :2]).max(axis=1) > _STILL) | (np.abs(turn) * L > _STILL) | (finger_moves > _STILL)
+    # a pinch: two finger contacts whose normals push against each other
+    f1 = c.on & (c.finger == 0)[None, :]
+    f2 = c.on & (c.finger == 1)[None, :]
+    n1 = np.where(f1[..., None], c.normals, 0.0).sum(axis=1)
+    n2 = np.where(f2[..., None], c.normals, 0.0).sum(axis=1)
+    squeeze = f1.any(axis=1) & f2.any(axis=1) & ((n1 * n2).sum(axis=1) <= SQUEEZE_COS * np.linalg.norm(n1, axis=1)
+                                                  * np.linalg.norm(n2, axis=1))
+    if world.gripper.fixed_width:  # rigid fingers squeeze nothing: the motion decides alone
+        squeeze[:] = False
+    count = c.on.sum(axis=1)
+    todo = moving & ~squeeze & (count > 0)
+    skipped = int((todo & (count > MAX_CONTACTS)).sum())
+    if skipped:
+        log.info("forward check: %d waypoint(s) with more than %d contacts left unchecked", skipped, MAX_CONTACTS)
+    todo &= count <= MAX_CONTACTS
+    first: tuple[int, str] | None = None
+    checked = 0
+    for kc in np.unique(count[todo]):
+        sel = np.flatnonzero(todo & (count == kc))
+        cols = np.argsort(~c.on[sel], axis=1, kind="stable")[:, :kc]
+
+        def take(a: np.ndarray, sel: IntArray = sel, cols: IntArray = cols) -> np.ndarray:
+            return np.take_along_axis(a[sel], cols[..., None] if a.ndim == 3 else cols, axis=1)
+
+        res = alternative_motions(take(c.points), take(c.normals), take(c.mu), np.ones((sel.size, kc), bool),
+                                  take(other), com0[sel], L, planned[sel])
+        checked += sel.size
+        ambiguous[sel] = res.ambiguous
+        if res.ambiguous.any():
+            j = int(np.argmax(res.ambiguous))
+            i = int(sel[j])
+            if first is None or i < first[0]:
+                labels = tuple(c.labels[k] for k in cols[j])
+                first = (i, _describe(labels, res.modes[j], res.twist[j]))
+    if first is None:
+        return ForwardReport(ambiguous, checked)
+    i, why = first
+    return ForwardReport(ambiguous, checked, int(flat.step[i]), int(flat.local[i]),
+                         f"waypoint {int(flat.local[i])}: {why}")

@@ -1,0 +1,72 @@
+"""The forward problem on plans (ldhp_tamp.executability): the commanded finger motion
+must make the planned object motion and no other."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from geometry.poses import Pose
+from ldhp_tamp.executability import forward_check
+from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStats, PlanStatus, Step, Waypoint, read_plan
+from ldhp_tamp.scenario import load_scenario, load_scenario_string
+
+SPEC = Path(__file__).resolve().parents[1] / "data" / "spec"
+
+TALL_BLOCK = """
+format = "ldhp-scenario/1"
+name = "tall-block"
+[object]
+vertices = [[0, 0], [40, 0], [40, 100], [0, 100]]
+[[environment.solids]]
+name = "table"
+vertices = [[-300, -50], [300, -50], [300, 0], [-300, 0]]
+[gripper]
+model = "two-point"
+finger_radius = 5
+spacing = [20, 140]
+[friction]
+environment = {mu_env}
+gripper = 0.8
+[task]
+start = [0, 0, 0]
+goal = [0, 0, 0]
+"""
+
+
+def _tip_plan(height: float, turn_deg: float = 5.0, steps: int = 5) -> Plan:
+    """One finger on the block's left face at ``height``, the block tipped clockwise about
+    its bottom-right corner (40, 0) with the finger carried along (a MoveObject step)."""
+    grip0 = Pose(-35.0, height, math.pi)  # finger 1 at (-5, height), finger 2 further left
+    wps = []
+    for k in range(steps + 1):
+        a = -math.radians(turn_deg) * k / steps
+        c, s = math.cos(a), math.sin(a)
+        obj = Pose(40.0 - c * 40.0, -s * 40.0, a)  # the turn about (40, 0)
+        contact = obj.apply((0.0, height))
+        wps.append(Waypoint(obj, obj.compose(grip0), 60.0, ((float(contact[0]), float(contact[1])), None)))
+    step = Step("tip", Family.MOVE_OBJECT, {}, ("l1-e1", "v2-e1"), tuple(wps))
+    return Plan(PLAN_FORMAT, "tall-block", "0" * 64, PlanStatus.SOLVED, (step,), PlanStats())
+
+
+@pytest.mark.parametrize("mu_env, height, ambiguous", [
+    (0.9, 90.0, False),  # tipping needs 0.22 W of push, sliding 0.9 W: it tips as planned
+    (0.1, 90.0, True),   # sliding needs 0.1 W: the block slides along the table instead
+    (0.9, 15.0, False),  # held low, the finger rises along the arc and lifts the block's side by
+                         # friction (0.43 W of push, floor friction within 0.9): it tips
+])
+def test_a_one_finger_tip_is_refused_when_the_block_would_slide(mu_env: float, height: float, ambiguous: bool) -> None:
+    scenario = load_scenario_string(TALL_BLOCK.format(mu_env=mu_env), "tall-block")
+    report = forward_check(_tip_plan(height), scenario)
+    assert report.checked > 0
+    assert (not report.ok) is ambiguous
+    if ambiguous:
+        assert report.step == 0 and report.waypoint == 0 and "-e3 slides" in report.reason  # the table top is e3
+
+
+def test_a_pinch_of_a_gripper_that_closes_is_left_to_the_grip_force() -> None:
+    plan = read_plan(SPEC / "pick-plan.json")
+    report = forward_check(plan, load_scenario(SPEC / "pick.toml"))
+    assert report.ok
