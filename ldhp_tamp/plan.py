@@ -8,7 +8,9 @@ what other tools read. Inside the package poses are :class:`~geometry.poses.Pose
 Reading is strict about what the spec requires (every key of a plan, a step and a
 waypoint; numbers finite; poses ``[x, y, theta]``) and names the file and the JSON path of
 the first problem (``plan.json: steps[2].waypoints[4].gripper: expected [x, y, theta]``).
-Keys the spec does not name are ignored, except in ``stats``, which keeps them.
+The optional ``finger_forces`` of a waypoint is read (and checked) when present and
+written when set. Keys the spec does not name are ignored, except in ``stats``, which
+keeps them.
 Writing is atomic: a temporary file in the target's folder, then :func:`os.replace`.
 """
 
@@ -32,6 +34,7 @@ __all__ = [
     "DECIMALS",
     "PLAN_FORMAT",
     "Family",
+    "Force",
     "Plan",
     "PlanStats",
     "PlanStatus",
@@ -64,6 +67,9 @@ _COUNTER_KEYS: tuple[str, ...] = (
 #: A world point (mm).
 Point = tuple[float, float]
 
+#: A finger's force on the object (N): ``(normal, tangential)``, see :class:`Waypoint`.
+Force = tuple[float, float]
+
 
 class PlanStatus(str, enum.Enum):
     """Outcome of a solve: a failed solve is a plan with a status, not an exception."""
@@ -90,12 +96,18 @@ class Waypoint:
     finger_contacts : tuple
         Per finger (finger 1, finger 2) the world point (mm) where it touches the
         object, or ``None``.
+    finger_forces : tuple or None
+        Optional: per finger the force (N) it applies to the object as
+        ``(normal, tangential)``, the tangential component along the touched object
+        edge's counter-clockwise direction, or ``None`` for a finger without contact;
+        ``None`` altogether when the plan does not say (the spec's optional key).
     """
 
     object: Pose
     gripper: Pose
     width: float
     finger_contacts: tuple[Point | None, Point | None] = (None, None)
+    finger_forces: tuple[Force | None, Force | None] | None = None
 
     def __post_init__(self) -> None:
         if len(self.finger_contacts) != 2:
@@ -103,6 +115,13 @@ class Waypoint:
         pts = tuple(None if p is None else (float(p[0]), float(p[1])) for p in self.finger_contacts)
         object.__setattr__(self, "finger_contacts", pts)
         object.__setattr__(self, "width", float(self.width))
+        if self.finger_forces is not None:
+            if len(self.finger_forces) != 2:
+                raise ValueError(f"finger_forces needs two entries, got {len(self.finger_forces)}")
+            if any(f is not None and len(f) != 2 for f in self.finger_forces):
+                raise ValueError("finger_forces: each entry is (normal, tangential) or None")
+            forces = tuple(None if f is None else (float(f[0]), float(f[1])) for f in self.finger_forces)
+            object.__setattr__(self, "finger_forces", forces)
 
 
 @dataclass(frozen=True)
@@ -240,11 +259,19 @@ class _Reader:
             self.fail(cw, "expected [finger 1, finger 2], each [x, y] or null")
         pts = tuple(None if c is None else tuple(self.numbers(c, 2, f"{cw}[{k}]", "[x, y] or null"))
                     for k, c in enumerate(contacts))
+        forces = None
+        if "finger_forces" in d:
+            ff, fw = d["finger_forces"], f"{where}.finger_forces"
+            if not isinstance(ff, list) or len(ff) != 2:
+                self.fail(fw, "expected [finger 1, finger 2], each [normal, tangential] or null")
+            forces = tuple(None if f is None else tuple(self.numbers(f, 2, f"{fw}[{k}]", "[normal, tangential] or null"))
+                           for k, f in enumerate(ff))
         return Waypoint(
             object=self.pose(self.key(d, "object", where), f"{where}.object"),
             gripper=self.pose(self.key(d, "gripper", where), f"{where}.gripper"),
             width=self.number(self.key(d, "width", where), f"{where}.width"),
             finger_contacts=pts,  # type: ignore[arg-type]
+            finger_forces=forces,  # type: ignore[arg-type]
         )
 
     def step(self, value: Any, where: str) -> Step:
@@ -425,10 +452,16 @@ def _pose(p: Pose) -> list[int | float]:
     return [_num(v) for v in p.to_degrees()]
 
 
+def _pair(p: tuple[float, float] | None) -> list[int | float] | None:
+    return None if p is None else [_num(p[0]), _num(p[1])]
+
+
 def _waypoint_json(w: Waypoint) -> str:
-    contacts = [None if c is None else [_num(c[0]), _num(c[1])] for c in w.finger_contacts]
-    return json.dumps({"object": _pose(w.object), "gripper": _pose(w.gripper), "width": _num(w.width),
-                       "finger_contacts": contacts}, allow_nan=False)
+    d: dict[str, Any] = {"object": _pose(w.object), "gripper": _pose(w.gripper), "width": _num(w.width),
+                         "finger_contacts": [_pair(c) for c in w.finger_contacts]}
+    if w.finger_forces is not None:
+        d["finger_forces"] = [_pair(f) for f in w.finger_forces]
+    return json.dumps(d, allow_nan=False)
 
 
 def _stats_json(s: PlanStats) -> dict[str, Any]:
