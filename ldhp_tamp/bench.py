@@ -116,6 +116,9 @@ class BenchOptions:
     timeout_s: float | None = None
     grace_s: float = 10.0
     jobs: int = 1
+    simulate: bool = True
+    """Replay every solved plan in the physics simulation (:mod:`ldhp_tamp.simulate`):
+    the ``executes`` column."""
 
     def __post_init__(self) -> None:
         if self.engines is not None:
@@ -160,6 +163,7 @@ class RunSpec:
     object_vertices: int
     timeout_s: float | None = None
     plan_file: str | None = None
+    simulate: bool = True
 
 
 @dataclass(frozen=True)
@@ -191,6 +195,11 @@ class BenchRow:
     grasp_graph_edges: int | None = None
     top_iterations: int | None = None
     refinements: int | None = None
+    executes: bool | None = None
+    """Solved plans: whether the plan executes in the physics simulation (``None``: not
+    simulated)."""
+    diverges_at: int | None = None
+    sim_wall_s: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values, in column order (the status as its string)."""
@@ -252,7 +261,8 @@ def plan_runs(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions
                 for seed in range(options.seeds):
                     specs.append(RunSpec(index=len(specs), scenario_file=str(path), scenario=sc.name,
                                          engine=engine, seed=seed, samples_per_edge=k,
-                                         object_vertices=sc.world.object.n, timeout_s=options.timeout_s))
+                                         object_vertices=sc.world.object.n, timeout_s=options.timeout_s,
+                                         simulate=options.simulate))
     return tuple(specs)
 
 
@@ -287,7 +297,15 @@ def solve_run(spec: RunSpec) -> BenchRow:
     stats = plan.stats
     times = stats.time_s
     status = _status(result.status.value, times.get("total"), spec.timeout_s)
-    return _row(spec, status, result.reason or (plan.reason or ""), time.perf_counter() - start,
+    sim: dict[str, Any] = {}
+    if spec.simulate and result.solved:
+        from ldhp_tamp.simulate import simulate_plan
+
+        t0 = time.perf_counter()
+        report = simulate_plan(plan, scenario)
+        sim = {"executes": report.executes, "diverges_at": report.diverged_step,
+               "sim_wall_s": round(time.perf_counter() - t0, 4)}
+    return _row(spec, status, result.reason or (plan.reason or ""), time.perf_counter() - start, **sim,
                 time_total_s=times.get("total"), time_setup_s=times.get("setup"),
                 time_symbolic_s=times.get("symbolic"), time_streams_s=times.get("streams"),
                 time_grasp_graph_s=times.get("grasp_graph"),
@@ -481,7 +499,7 @@ def format_json(rows: Sequence[BenchRow], options: BenchOptions, created: str | 
         "options": {"engines": list(options.engines) if options.engines else None, "seeds": options.seeds,
                     "samples_per_edge": list(options.samples) if options.samples else None,
                     "timeout_s": options.timeout_s, "grace_s": options.grace_s,
-                    "hard_limit_s": options.hard_limit_s, "jobs": options.jobs,
+                    "hard_limit_s": options.hard_limit_s, "jobs": options.jobs, "simulate": options.simulate,
                     "solver_timeout": options.timeout_s is not None and solver_has_timeout()},
         "host": _host(),
         "columns": list(COLUMNS),
@@ -509,9 +527,9 @@ def format_summary(rows: Sequence[BenchRow], options: BenchOptions) -> str:
         f"{len(rows)} runs, {options.jobs} at a time; timeout: {limit}.",
         "Times are the solver's own wall time (`stats.time_s` of the plan, worker start-up "
         "excluded), over solved runs; with more than one job at a time runs share the CPUs.", "",
-        "| scenario | engine | K | runs | solved | success | timeout | error "
+        "| scenario | engine | K | runs | solved | executes in simulation | success | timeout | error "
         "| median time (s) | mean time (s) | max time (s) | median steps |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     tiers = ("setup", "symbolic", "streams", "grasp_graph")
     tier_lines = [
@@ -524,8 +542,10 @@ def format_summary(rows: Sequence[BenchRow], options: BenchOptions) -> str:
         times = [r.time_total_s for r in ok if r.time_total_s is not None]
         count = {s: sum(r.status is s for r in rs) for s in BenchStatus}
         steps = [r.steps for r in ok if r.steps is not None]
+        simulated = [r for r in ok if r.executes is not None]
+        executes = f"{sum(bool(r.executes) for r in simulated)}/{len(simulated)}" if simulated else "-"
         lines.append(
-            f"| {scenario} | {engine} | {k} | {len(rs)} | {len(ok)} | {100 * len(ok) / len(rs):.0f}% "
+            f"| {scenario} | {engine} | {k} | {len(rs)} | {len(ok)} | {executes} | {100 * len(ok) / len(rs):.0f}% "
             f"| {count[BenchStatus.TIMEOUT]} | {count[BenchStatus.ERROR]} "
             f"| {_num(statistics.median(times) if times else None)} "
             f"| {_num(statistics.fmean(times) if times else None)} | {_num(max(times) if times else None)} "

