@@ -63,8 +63,9 @@ from ldhp_tamp.errors import DomainError
 from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStatus
 from ldhp_tamp.scenario import Scenario, find_domain
 
-__all__ = ["RULES", "SLIP_TOL", "PlanArrays", "PlanContacts", "ValidationReport", "Violation", "domain_actions",
-           "finger_offsets", "format_violation", "plan_contacts", "rotate_vectors", "validate_plan"]
+__all__ = ["RULES", "SLIP_TOL", "SUPPORT_ROUNDS", "PlanArrays", "PlanContacts", "SupportAnalysis", "ValidationReport",
+           "Violation", "domain_actions", "finger_offsets", "format_violation", "plan_contacts", "rotate_vectors",
+           "support_analysis", "validate_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -535,6 +536,175 @@ def _support(world: World, flat: PlanArrays, max_force: float | None = None) -> 
                 force[g[need]] = r.max_finger_force
                 lps += int(need.sum())
     return _Support(ok7, ok8, ok9, force, lps)
+
+
+#: Bisection rounds of :func:`support_analysis`: the friction fractions it reports are
+#: the feasible ends of brackets of width 2**-24 (about 6e-8).
+SUPPORT_ROUNDS = 24
+
+
+@dataclass(frozen=True, eq=False)
+class SupportAnalysis:
+    """How much friction and squeeze a plan's quasi-static support needs, per waypoint.
+
+    Waypoints are those of :meth:`PlanArrays.of` (the non-empty steps', joins twice), in
+    order; ``step`` and ``waypoint`` give each one's indices in the file.
+
+    Attributes
+    ----------
+    friction_needed : ndarray, shape (W,)
+        The least fraction ``f`` of every friction coefficient (all contacts' ``mu``
+        scaled by ``f`` together) with which rule 8 still holds at the waypoint (rule 7's
+        full cones at the last): 0 where it holds frictionless, ``inf`` where it does not
+        hold even at ``f = 1``, else the feasible end of a bisection bracket of width
+        ``2**-rounds``. Finger forces are unbounded here (``max_force`` does not enter).
+    finger_forces : ndarray, shape (W, 2, 2)
+        Per finger ``[normal, tangential]`` (N) on the object in the plan spec's
+        convention (tangential along the object edge's counter-clockwise direction): the
+        force solution of :func:`geometry.mechanics.bounded_support` with rule 8's modes,
+        the equilibrium whose largest finger normal force is least. ``nan`` for a finger
+        without contact, and for both where no finger touches or no equilibrium exists.
+    max_finger_force : ndarray, shape (W,)
+        The largest finger normal force (N) of that equilibrium; ``nan`` where no LP ran
+        (no finger touches) or it found no equilibrium.
+    step, waypoint : ndarray of int, shape (W,)
+        Each waypoint's step index and index within its step.
+    """
+
+    friction_needed: FloatArray
+    finger_forces: FloatArray
+    max_finger_force: FloatArray
+    step: IntArray
+    waypoint: IntArray
+
+    @property
+    def worst(self) -> int | None:
+        """Index (into the arrays) of the waypoint needing the most friction, the first of
+        equals; ``None`` for a plan without waypoints."""
+        return int(np.argmax(self.friction_needed)) if self.friction_needed.size else None
+
+    @property
+    def margin(self) -> float:
+        """``1 - max(friction_needed)``: the fraction of every friction coefficient the plan
+        could lose and still balance the object at its worst waypoint (1 when no waypoint
+        needs friction, ``-inf`` when some waypoint is not supported at all; ``nan``
+        without waypoints)."""
+        i = self.worst
+        return math.nan if i is None else 1.0 - float(self.friction_needed[i])
+
+    @property
+    def worst_at(self) -> tuple[int, int] | None:
+        """``(step, waypoint)`` of :attr:`worst`, as in the file."""
+        i = self.worst
+        return None if i is None else (int(self.step[i]), int(self.waypoint[i]))
+
+    @property
+    def largest_finger_force(self) -> float:
+        """The largest finger normal force (N) over the plan's waypoints with an
+        equilibrium; 0 when no finger ever touches."""
+        f = self.max_finger_force[np.isfinite(self.max_finger_force)]
+        return float(f.max()) if f.size else 0.0
+
+
+def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUNDS) -> SupportAnalysis:
+    """The friction each waypoint needs and the finger forces that hold the object.
+
+    Rule 8's contacts and modes (:func:`plan_contacts`, the motion to the next waypoint;
+    rule 7's full cones at the last waypoint) at every waypoint. ``friction_needed`` is
+    found by a bisection over all waypoints at once: each round one
+    :func:`geometry.mechanics.feasible_batch` (margin 0, as rules 7-8) per number of
+    contact candidates, with every ``mu`` scaled by the waypoint's midpoint. Feasibility
+    is monotone in the scale for sticking contacts; a sliding contact's force turns with
+    its ``mu``, and there the value is a scale at which rule 8 holds with a smaller one
+    in the last bracket that does not. The forces are the LP
+    :func:`geometry.mechanics.bounded_support` with the gripper's ``max_force`` (which
+    does not change the solution: it minimises the largest finger normal force), on the
+    waypoints where a finger touches and rule 8 holds.
+
+    Parameters
+    ----------
+    plan : Plan
+    scenario : Scenario
+    rounds : int
+        Bisection rounds (bracket width ``2**-rounds``).
+
+    Returns
+    -------
+    SupportAnalysis
+
+    Examples
+    --------
+    The spec's example lifts a 1 kg block pinched by its ends (gripper ``mu`` 0.6): in
+    the air any friction holds it with enough squeeze, and the least squeeze is
+    ``W / (2 mu)`` = 8.175 N per finger.
+
+    >>> from pathlib import Path
+    >>> from ldhp_tamp.plan import read_plan
+    >>> from ldhp_tamp.scenario import load_scenario
+    >>> spec = Path(__file__).resolve().parents[1] / "docs" / "formats" / "examples"  # in a checkout
+    >>> a = support_analysis(read_plan(spec / "pick-plan.json"), load_scenario(spec / "pick.toml", check_planner=False))
+    >>> round(a.margin, 4), a.worst_at, round(a.largest_finger_force, 3)
+    (1.0, (2, 1), 8.175)
+    """
+    world = scenario.world
+    flat = PlanArrays.of(plan)
+    n_wp = len(flat)
+    need = np.full(n_wp, np.inf)
+    forces = np.full((n_wp, 2, 2), np.nan)
+    largest = np.full(n_wp, np.nan)
+    max_force = getattr(world.gripper, "max_force", None)
+    com = transform_points(flat.obj, world.object.com)[:, 0] if n_wp else np.zeros((0, 2))
+    scale = world.object.length_scale
+    for start in range(0, n_wp, _BLOCK):
+        block = slice(start, min(start + _BLOCK, n_wp))
+        c = plan_contacts(world, flat.take(block))
+        mo = _motion(world, flat, np.arange(block.start, block.stop), c)
+        count = c.on.sum(axis=1)
+        for kc in np.unique(count[count > 0]):
+            rows = np.flatnonzero(count == kc)
+            cols = np.argsort(~c.on[rows], axis=1, kind="stable")[:, :kc]
+
+            def take(a: np.ndarray, rows: IntArray = rows, cols: IntArray = cols) -> np.ndarray:
+                return np.take_along_axis(a[rows], cols[..., None] if a.ndim == 3 else cols, axis=1)
+
+            sliding = take(mo.sliding)
+            modes = np.where(sliding, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING).astype(np.int8)
+            moving = mechanics.Contacts.make(take(c.points), take(c.normals), take(c.mu), modes, take(mo.slide_dirs))
+            com_r, g = com[block][rows], start + rows
+            need[g] = _friction_needed(moving, com_r, scale, rounds)
+            fingers = c.finger[cols]  # (r, kc)
+            lp = np.isfinite(need[g]) & (fingers >= 0).any(axis=1)
+            if lp.any():
+                r = mechanics.bounded_support(moving.select(lp), com_r[lp], scale, world.object.weight,
+                                              fingers[lp], max_force, margin=0.0)
+                forces[g[lp]] = r.finger_forces
+                largest[g[lp]] = r.max_finger_force
+    forces[~flat.declared] = np.nan  # a finger without contact has no force
+    # No contact at all: the weight is not balanced (rule 7 fails), need stays inf.
+    return SupportAnalysis(need, forces, largest, flat.step, flat.local)
+
+
+def _friction_needed(contacts: mechanics.Contacts, com: FloatArray, scale: float, rounds: int) -> FloatArray:
+    """The least scale ``f`` in [0, 1] of every ``mu`` with which ``contacts`` balance the
+    weight (closed cones), by vectorised bisection; ``inf`` where not even at 1."""
+    out = np.full(contacts.batch, np.inf)
+    ok = mechanics.feasible_batch(contacts, com, scale, margin=0.0)
+    free = np.zeros(contacts.batch, dtype=bool)
+    if ok.any():
+        free[ok] = mechanics.feasible_batch(contacts.select(ok).with_mu(0.0), com[ok], scale, margin=0.0)
+    out[free] = 0.0
+    todo = np.flatnonzero(ok & ~free)
+    if todo.size == 0:
+        return out
+    sub, com_s = contacts.select(todo), com[todo]
+    lo, hi = np.zeros(todo.size), np.ones(todo.size)
+    for _ in range(rounds):
+        mid = 0.5 * (lo + hi)
+        f = mechanics.feasible_batch(sub.with_mu(sub.mu * mid[:, None]), com_s, scale, margin=0.0)
+        hi = np.where(f, mid, hi)
+        lo = np.where(f, lo, mid)
+    out[todo] = hi
+    return out
 
 
 # --------------------------------------------------------------------------------------

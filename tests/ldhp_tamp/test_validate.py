@@ -563,3 +563,118 @@ def test_cli_names_the_new_rules(capsys) -> None:
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("rule 9 (finger force limit), step 2 (air-move), waypoints 1-20: ")
     assert "violation of rules 9 (finger force limit)" in out[-1]
+
+
+# --------------------------------------------------------------------------- support analysis
+
+
+def _pinch_at(plan: Plan, low: float, high: float) -> Plan:
+    """The valid plan with the lift's pinch skewed: finger 1 touches the block's left end
+    ``low`` mm above its bottom, finger 2 the right end ``high`` mm above it."""
+    lift = plan.steps[2]
+    wps = tuple(replace(w, finger_contacts=((0.0, w.object.y + low), (100.0, w.object.y + high)))
+                for w in lift.waypoints)
+    return edit_step(plan, 2, wps)
+
+
+def test_support_analysis_of_the_spec_example(pick: Scenario, plan: Plan) -> None:
+    """By hand: on the table (no finger, or fingers that need not squeeze) the block
+    holds frictionless (0). In the air two opposite fingers at one height hold W = 9.81 N
+    with any friction given enough squeeze N (mu f >= W / (2 N)), so the least fraction
+    is the bisection's floor, above 0; the least squeeze is N = W / (2 mu) = 8.175 N per
+    finger, each carrying W / 2 = 4.905 N tangentially: upward, which is clockwise on
+    the left end (-) and counter-clockwise on the right end (+)."""
+    from ldhp_tamp.validate import SUPPORT_ROUNDS, support_analysis
+
+    a = support_analysis(plan, pick)
+    lifted = (a.step == 2) & (a.waypoint >= 1)
+    assert a.friction_needed.shape == (57,) and a.finger_forces.shape == (57, 2, 2)
+    assert (a.friction_needed[~lifted] == 0).all()
+    assert (a.friction_needed[lifted] > 0).all() and (a.friction_needed[lifted] <= 2.0 ** -SUPPORT_ROUNDS).all()
+    assert a.margin == pytest.approx(1.0, abs=1e-6) and a.margin < 1.0
+    assert a.worst_at == (2, 1)
+    assert a.largest_finger_force == pytest.approx(9.81 / 1.2, abs=1e-6)
+    assert a.finger_forces[lifted] == pytest.approx(np.broadcast_to([[8.175, -4.905], [8.175, 4.905]], (20, 2, 2)),
+                                                    abs=1e-6)
+    assert a.max_finger_force[lifted] == pytest.approx(np.full(20, 8.175), abs=1e-6)
+    untouched = ~pick_declared(plan)
+    assert np.isnan(a.finger_forces[untouched]).all() and np.isnan(a.max_finger_force[untouched]).all()
+    on_table = np.flatnonzero(pick_declared(plan) & ~lifted)  # the close's last waypoint, the lift's first
+    assert on_table.tolist() == [35, 36]
+    assert a.finger_forces[on_table] == pytest.approx(np.zeros((2, 2, 2)))  # the table carries the block
+
+
+def pick_declared(plan: Plan) -> np.ndarray:
+    """(W,) whether any finger declares a contact at each waypoint."""
+    return np.array([any(c is not None for c in w.finger_contacts) for w in plan.waypoints])
+
+
+def test_friction_needed_is_inf_where_the_plan_drops_the_block(pick: Scenario) -> None:
+    from ldhp_tamp.validate import support_analysis
+
+    a = support_analysis(read_plan(INVALID), pick)
+    air = (a.step == 1) & (a.waypoint >= 1)
+    assert np.isinf(a.friction_needed[air]).all() and (a.friction_needed[~air] == 0).all()
+    assert a.margin == -math.inf and a.worst_at == (1, 1)
+    assert np.isnan(a.finger_forces).all() and a.largest_finger_force == 0.0
+
+
+def test_a_skewed_pinch_needs_a_fraction_of_its_friction(pick: Scenario, plan: Plan) -> None:
+    """Fingers 30 mm apart in height on the ends of a 100 mm block: with squeeze N the
+    moment balance gives T1 - T2 = 0.6 N and T1 + T2 = W, so T1 = W / 2 + 0.3 N <= mu f N
+    for some N iff mu f > 0.3: f > 0.3 / 0.6 = 0.5. At the gripper's mu (0.6) the least
+    squeeze is N = W / (2 (0.6 - 0.3)) = 16.35 N, finger 1 carrying the whole weight."""
+    from ldhp_tamp.validate import support_analysis
+
+    a = support_analysis(_pinch_at(plan, 5.0, 35.0), pick)
+    lifted = (a.step == 2) & (a.waypoint >= 1)
+    assert a.friction_needed[lifted] == pytest.approx(np.full(20, 0.5), abs=1e-6)
+    assert (a.friction_needed[lifted] > 0.5).all()  # at exactly 0.5 the cones' edges are parallel: no balance
+    assert a.margin == pytest.approx(0.5, abs=1e-6) and a.worst_at == (2, 1)
+    assert a.finger_forces[lifted] == pytest.approx(np.broadcast_to([[16.35, -9.81], [16.35, 0.0]], (20, 2, 2)),
+                                                    abs=1e-5)
+    assert a.largest_finger_force == pytest.approx(16.35, abs=1e-5)
+    too_skewed = support_analysis(_pinch_at(plan, 5.0, 35.0 + 35.0), pick)  # 70 mm: 0.7 > 0.6
+    assert np.isinf(too_skewed.friction_needed[lifted]).all() and too_skewed.margin == -math.inf
+
+
+def test_the_force_limit_changes_neither_friction_nor_forces(pick: Scenario, plan: Plan) -> None:
+    """``max_force`` below what the pinch needs breaks rule 9, but the analysis reports the
+    friction with unbounded squeeze and the least squeeze, as without the limit."""
+    from ldhp_tamp.validate import support_analysis
+
+    bounded = variant(lambda t: t.replace("opening = [0, 140]", "opening = [0, 140]\nmax_force = 5"))
+    a, b = support_analysis(plan, pick), support_analysis(plan, bounded)
+    assert np.array_equal(a.friction_needed, b.friction_needed)
+    assert np.allclose(a.finger_forces, b.finger_forces, equal_nan=True, atol=1e-9)
+    assert b.largest_finger_force == pytest.approx(8.175, abs=1e-6)
+
+
+@pytest.mark.parametrize("dy, holds", [(1.0, True), (-1.0, False)])
+def test_support_analysis_uses_the_motions_sliding_modes(pick: Scenario, plan: Plan, dy: float, holds: bool) -> None:
+    """The pads slide 1 mm per waypoint along the held block's ends (rule 8 test above):
+    sliding up, kinetic friction carries the block with any friction; sliding down it
+    pulls the block down whatever the friction (inf). The last waypoint has full cones."""
+    from ldhp_tamp.validate import support_analysis
+
+    a = support_analysis(_slide(plan, dy), pick)
+    sliding = a.friction_needed[-4:-1]
+    assert (np.isfinite(sliding) & (sliding < 1e-6)).all() if holds else np.isinf(sliding).all()
+    assert 0 < a.friction_needed[-1] < 1e-6
+    assert a.worst_at == ((2, 1) if holds else (3, 0))
+
+
+def test_support_analysis_is_fast(pick: Scenario, plan: Plan) -> None:
+    """2,057 waypoints, 2,022 of them pinched (an LP each) and a bisection over all."""
+    from ldhp_tamp.validate import support_analysis
+
+    last = plan.steps[-1].waypoints[-1]
+    up = tuple(replace(last, object=Pose(0.0, 100.0 + 0.001 * k, 0.0), gripper=Pose(50.0, 102.0 + 0.001 * k, 0.0),
+                       finger_contacts=((0.0, 120.0 + 0.001 * k), (100.0, 120.0 + 0.001 * k))) for k in range(2000))
+    long = replace(plan, steps=plan.steps + (Step("air-move", Family.MOVE_OBJECT, {}, ("free", "free"), up),))
+    support_analysis(plan, pick)  # imports scipy
+    t0 = time.perf_counter()
+    a = support_analysis(long, pick)
+    elapsed = time.perf_counter() - t0
+    assert a.friction_needed.shape == (2057,) and np.isfinite(a.max_finger_force).sum() == 1 + 21 + 2000
+    assert elapsed < 3.0
