@@ -39,7 +39,7 @@ from ldhp_tamp.primitives import REGISTRY, Family
 from ldhp_tamp.primitives.registry import Sequel, Transition
 from ldhp_tamp.scenario import Scenario
 from ldhp_tamp.streams import PathSearch, PosePath, StreamStats
-from ldhp_tamp.validate import validate_plan
+from ldhp_tamp.validate import support_analysis, validate_plan
 
 log = logging.getLogger(__name__)
 
@@ -133,6 +133,21 @@ def _failed(scenario: Scenario, engine: str, reason: str, c: _Counters, clock: _
     log.info("failed: %s", reason)
     plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.FAILED, (), _stats(engine, c, clock), reason)
     return SolveResult(SolveStatus.FAILED, plan, reason)
+
+
+def _annotate(plan: Plan, scenario: Scenario) -> Plan:
+    """``plan`` with each waypoint's ``finger_forces`` and, in its stats, the support
+    margin, where it is least and the largest finger force (``validate.support_analysis``)."""
+    a = support_analysis(plan, scenario)
+    forces = iter(a.finger_forces.tolist())
+    steps = tuple(replace(s, waypoints=tuple(
+        replace(w, finger_forces=tuple(None if np.isnan(f).any() else (f[0], f[1]) for f in next(forces)))
+        for w in s.waypoints)) for s in plan.steps)
+    at = a.worst_at
+    extra = dict(plan.stats.extra, support_margin=round(a.margin, 4) if np.isfinite(a.margin) else None,
+                 support_margin_at=None if at is None else {"step": at[0], "waypoint": at[1]},
+                 max_finger_force_n=round(a.largest_finger_force, 6))
+    return replace(plan, steps=steps, stats=replace(plan.stats, extra=extra))
 
 
 def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
@@ -274,8 +289,8 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                 c.pose_paths += 1
                 outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline, judge)
                 if outcome.steps is not None:
-                    plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, outcome.steps,
-                                _stats(engine, c, clock))
+                    plan = _annotate(Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, outcome.steps,
+                                          _stats(engine, c, clock)), scenario)
                     say(f"solved in {clock.as_dict()['total']:.2f} s")
                     return SolveResult(SolveStatus.SOLVED, plan)
                 failures.append(outcome.reason)

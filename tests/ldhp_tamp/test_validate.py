@@ -678,3 +678,33 @@ def test_support_analysis_is_fast(pick: Scenario, plan: Plan) -> None:
     elapsed = time.perf_counter() - t0
     assert a.friction_needed.shape == (2057,) and np.isfinite(a.max_finger_force).sum() == 1 + 21 + 2000
     assert elapsed < 3.0
+
+
+def test_the_planner_annotates_its_plans_with_the_analysis(pick: Scenario, plan: Plan, tmp_path: Path) -> None:
+    """``tamp._annotate``, run on every solved plan: each waypoint gets its finger forces
+    (``null`` for a finger without contact), the stats the margin, where it is least and
+    the largest finger force; the plan still validates and survives the file."""
+    from ldhp_tamp.plan import plan_to_json, read_plan_string, write_plan
+    from ldhp_tamp.tamp import _annotate
+
+    annotated = _annotate(plan, pick)
+    wps = annotated.waypoints
+    assert all(w.finger_forces is not None for w in wps)
+    assert wps[0].finger_forces == (None, None)
+    assert wps[35].finger_forces == ((0.0, 0.0), (0.0, 0.0))  # closed on the block, the table carries it
+    assert np.array(wps[-1].finger_forces) == pytest.approx(np.array([[8.175, -4.905], [8.175, 4.905]]), abs=1e-6)
+    extra = annotated.stats.extra
+    assert extra["support_margin"] == 1.0 and extra["support_margin_at"] == {"step": 2, "waypoint": 1}
+    assert extra["max_finger_force_n"] == pytest.approx(8.175)
+    assert validate_plan(annotated, pick).valid
+    path = write_plan(annotated, tmp_path / "annotated.json")
+    data = json.loads(path.read_text())
+    assert data["stats"]["support_margin_at"] == {"step": 2, "waypoint": 1}
+    assert np.array(data["steps"][2]["waypoints"][-1]["finger_forces"]) == pytest.approx(
+        np.array([[8.175, -4.905], [8.175, 4.905]]), abs=1e-5)
+    back = read_plan(path)
+    assert back.stats.extra["max_finger_force_n"] == pytest.approx(8.175, abs=1e-5)
+    assert plan_to_json(read_plan_string(path.read_text())) == path.read_text()
+    skewed = _annotate(_pinch_at(plan, 5.0, 35.0), pick)
+    assert skewed.stats.extra["support_margin"] == 0.5
+    assert skewed.stats.extra["max_finger_force_n"] == pytest.approx(16.35)
