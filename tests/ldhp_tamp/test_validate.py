@@ -708,3 +708,21 @@ def test_the_planner_annotates_its_plans_with_the_analysis(pick: Scenario, plan:
     skewed = _annotate(_pinch_at(plan, 5.0, 35.0), pick)
     assert skewed.stats.extra["support_margin"] == 0.5
     assert skewed.stats.extra["max_finger_force_n"] == pytest.approx(16.35)
+
+
+@pytest.mark.parametrize("path", BROKEN_FILES + [VALID, INVALID], ids=lambda p: p.name)
+def test_friction_needed_is_inf_exactly_where_rules_7_or_8_fail(path: Path, pick: Scenario) -> None:
+    """The analysis and the validator agree: ``inf`` where rule 7 or 8 fails, a fraction
+    in [0, 1] elsewhere, and finger forces wherever a finger touches a balanced waypoint."""
+    from ldhp_tamp.validate import PlanArrays, _support, support_analysis
+
+    plan = read_plan(path)
+    scenario = load_scenario(BROKEN / "pick-max-force-8.toml", check_planner=False) if "rule9" in path.name else pick
+    flat = PlanArrays.of(plan)
+    sup = _support(scenario.world, flat)
+    a = support_analysis(plan, scenario)
+    held = sup.rule7 & sup.rule8
+    assert np.array_equal(np.isinf(a.friction_needed), ~held)
+    assert ((a.friction_needed[held] >= 0) & (a.friction_needed[held] <= 1)).all()
+    touched = held[:, None] & flat.declared
+    assert np.isfinite(a.finger_forces[touched]).all() and np.isnan(a.finger_forces[~touched]).all()
