@@ -41,6 +41,10 @@ A run of consecutive waypoints of one step that break the same check the same wa
 so a systematic fault is one line, not a thousand. Indices are 0-based, as JSON paths.
 A plan made for another scenario file (``scenario_sha256`` differs) gets a warning, not a
 violation: the rules are about geometry, and the geometry is checked.
+
+:func:`support_analysis` measures what rules 7-9 only decide: per waypoint the fraction of
+the friction coefficients rule 8 needs and the finger forces that hold the object, and the
+plan's support margin (``docs/design/validation.md``, "Support margin and finger forces").
 """
 
 from __future__ import annotations
