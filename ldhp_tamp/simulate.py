@@ -47,6 +47,7 @@ __all__ = [
     "format_verdict",
     "report_to_json",
     "simulate_plan",
+    "simulate_push",
     "simulate_rest",
     "write_gif",
     "write_report",
@@ -713,4 +714,39 @@ def simulate_rest(world: World, object_pose: Pose, gripper_pose: Pose, width: fl
         run.mj.mj_step(run.model, run.data)
         if i % every == 0 or i == steps:
             out.append((run.time, *run.object_pose()))
+    return np.array(out)
+
+
+def simulate_push(world: World, object_pose: Pose, gripper_from: Pose, gripper_to: Pose, width: float,
+                  seconds: float, settle_s: float = 0.5, options: SimOptions = SimOptions(),
+                  sample_s: float = 0.1) -> FloatArray:
+    """Release the object at ``object_pose`` and drive the hand (fixed ``width``, no
+    preload) in a straight line from ``gripper_from`` to ``gripper_to`` (x, y and angle
+    interpolated linearly, the angle taking the short way) over ``seconds``, then hold it
+    ``settle_s``: a probe of the finger-object contacts (a rigid finger driven into the
+    object must push it).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(T, 7)``: time (s), object x, y (mm), theta (degrees), then the simulated hand's
+        x, y (mm), theta (degrees), every ``sample_s`` from 0.
+    """
+    sim = build_model(world, options.model)
+    run = _Runner(sim, world, options)
+    a = np.array([gripper_from.x * MM, gripper_from.y * MM, gripper_from.theta])
+    b = np.array([gripper_to.x * MM, gripper_to.y * MM, gripper_from.theta
+                  + float(wrap_angle(gripper_to.theta - gripper_from.theta))])
+    fingers = [-width / 2.0 * MM, width / 2.0 * MM]
+    run.place(object_pose, a, fingers)
+    run.command(a, fingers)
+    out = [(0.0, *run.object_pose(), *run.gripper_pose())]
+    every = max(1, int(round(sample_s / run.dt)))
+    moving = max(1, int(round(seconds / run.dt)))
+    steps = moving + int(round(settle_s / run.dt))
+    for i in range(1, steps + 1):
+        run.command(a + min(i / moving, 1.0) * (b - a), fingers)
+        run.mj.mj_step(run.model, run.data)
+        if i % every == 0 or i == steps:
+            out.append((run.time, *run.object_pose(), *run.gripper_pose()))
     return np.array(out)

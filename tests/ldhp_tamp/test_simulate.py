@@ -26,14 +26,16 @@ from ldhp_tamp.plan import read_plan, read_plan_string  # noqa: E402
 from ldhp_tamp.scenario import load_scenario, load_scenario_string  # noqa: E402
 from ldhp_tamp.sim_model import build_model, convex_pieces, planar_inertia  # noqa: E402
 from ldhp_tamp.simulate import (  # noqa: E402
-    REPORT_FORMAT, SimOptions, SimStatus, format_verdict, report_to_json, simulate_plan, simulate_rest,
-    write_gif)
+    REPORT_FORMAT, SimOptions, SimStatus, format_verdict, report_to_json, simulate_plan, simulate_push,
+    simulate_rest, write_gif)
 
 REPO = Path(__file__).resolve().parents[2]
 SPEC = REPO / "tests" / "data" / "spec"
 PICK = SPEC / "pick.toml"
 PICK_PLAN = SPEC / "pick-plan.json"
 PICK_INVALID = SPEC / "pick-plan-invalid.json"
+CONCAVE11 = REPO / "scenarios" / "gen_lift_concave11.toml"
+CONCAVE11_TIP = REPO / "tests" / "data" / "plans" / "sim-concave11-tip.json"
 G = 9.81
 
 
@@ -152,6 +154,71 @@ def test_block_on_a_slope_slides_as_coulomb_predicts() -> None:
     assert moved == pytest.approx(expected, rel=0.25)
     assert track[-1, 1] < track[0, 1] and track[-1, 2] < track[0, 2]  # down the slope
     assert abs(track[-1, 3] - 20.0) < 1.0  # sliding, not tumbling
+
+
+# A rigid finger (fixed width: geoms of the hand) driven into a concave object's edges
+# pushes it: the concave 11-gon of gen_lift_concave11 (notches v3-v4-v5 on the right,
+# v7-v8-v9 on top), 5 mm fingers 90 mm apart, mu 0.2. The expected travel is the hand's
+# travel after the finger reaches the face (circle-line geometry below).
+@pytest.mark.parametrize("start, end, pushed", [
+    # finger 2 (x = 62) into the right notch's corner v4 = (50, 65): both faces at x = 58.33
+    ((17.0, 65.0, 0.0), (-3.0, 65.0, 0.0), -(58.0 + 1.0 / 3.0 - 42.0)),
+    # the same with the gripper turned 180 degrees: finger 1 does it
+    ((17.0, 65.0, 180.0), (-3.0, 65.0, 180.0), -(58.0 + 1.0 / 3.0 - 42.0)),
+    # finger 1 (35, 150) into the top notch's face v8-v7, reached at x = 35 + 4.41
+    ((80.0, 150.0, 0.0), (100.0, 150.0, 0.0), 55.0 - 35.0 - (20.0 * 0.4472136 - 5.0) / 0.8944272),
+    # gen_lift_concave11's tip pose (gripper at -79.45 degrees, finger 2 on the face v4-v5),
+    # moved 15 mm left: into that face from the start
+    ((51.870245, 110.569904, -79.453406), (36.870245, 110.569904, -79.453406), -15.0),
+])
+def test_rigid_finger_pushes_a_concave_object(start, end, pushed) -> None:
+    world = load_scenario(CONCAVE11, check_planner=False).world
+    a, b = Pose.from_degrees(*start), Pose.from_degrees(*end)
+    track = simulate_push(world, Pose(0.0, 0.0, 0.0), a, b, 90.0, 3.0)
+    assert track[-1, 1] == pytest.approx(pushed, abs=0.5)
+    assert abs(track[-1, 2]) < 0.1 and abs(track[-1, 3]) < 0.5  # slid along the table, not tipped
+    assert track[-1, 4:6] == pytest.approx([b.x, b.y], abs=0.2)  # the hand followed its command
+    assert track[-1, 6] == pytest.approx(end[2], abs=0.05)
+
+
+def _gap_to(polygon: np.ndarray, point: np.ndarray, radius: float) -> float:
+    """Signed clearance (mm) between a circle and a polygon (negative: overlap)."""
+    import shapely
+
+    poly, p = shapely.Polygon(polygon), shapely.Point(point)
+    d = poly.exterior.distance(p)
+    return (-d if poly.contains(p) else d) - radius
+
+
+def test_a_tip_the_finger_motion_does_not_force_is_not_executed() -> None:
+    """gen_lift_concave11's tip (step 1) moves the zero-mobility gripper with the object,
+    finger 1 on the convex corner v7 = (45, 150) of the top notch: its motion is 7 degrees
+    from that corner's tangent, so against the object at rest the round finger rolls over
+    the corner (at most 0.034 mm of interference) and then clears the top edge, while
+    finger 2 leaves the right notch's face. Nothing forces the tip (a zero-mobility gripper
+    cannot squeeze): the object stays, and the replay diverges there."""
+    plan = read_plan(CONCAVE11_TIP)
+    scenario = load_scenario(CONCAVE11, check_planner=False)
+    world = scenario.world
+    rest = world.object_vertices(Pose(0.0, 0.0, 0.0))
+    wps = plan.steps[1].waypoints
+    assert plan.steps[1].primitive == "tip"
+    gaps: dict[int, list[float]] = {1: [], 2: []}
+    for u, v in zip(wps[:-1], wps[1:]):
+        for s in np.linspace(0.0, 1.0, 41)[:-1]:
+            pose = Pose(*(u.gripper.as_array() + s * (v.gripper.as_array() - u.gripper.as_array())))
+            for f, x in ((1, -45.0), (2, 45.0)):
+                gaps[f].append(_gap_to(rest, pose.apply(np.array([[x, 0.0]]))[0], 5.0))
+    g1, g2 = np.array(gaps[1]), np.array(gaps[2])
+    assert -0.05 < g1.min() < 0.0  # grazes v7
+    assert g1[40] > 0.3 and g1[7 * 40] > 1.9  # waypoints 1 and 7: above the top edge
+    assert g2[0] == pytest.approx(0.0, abs=1e-3) and np.all(np.diff(g2) > 0)  # leaves at once
+    r = simulate_plan(plan, scenario)
+    assert r.status is SimStatus.DIVERGES and (r.diverged_step, r.diverged_primitive) == (1, "tip")
+    during = [x for x in r.records if x.step == 1]
+    assert len(during) > 5
+    for x in during:
+        assert math.hypot(x.simulated[0], x.simulated[1]) < 0.01 and abs(x.simulated[2]) < 0.01
 
 
 # -------------------------------------------------------------------------------- plans
