@@ -35,7 +35,7 @@ PICK = SPEC / "pick.toml"
 PICK_PLAN = SPEC / "pick-plan.json"
 PICK_INVALID = SPEC / "pick-plan-invalid.json"
 CONCAVE11 = REPO / "scenarios" / "gen_lift_concave11.toml"
-CONCAVE11_TIP = REPO / "tests" / "data" / "plans" / "sim-concave11-tip.json"
+CONCAVE11_TIP = REPO / "tests" / "data" / "sim" / "concave11-tip-plan.json"
 G = 9.81
 
 

@@ -296,13 +296,13 @@ def test_rule_7_agrees_with_the_reference_linear_program(pick: Scenario) -> None
     """The validator's contacts and verdicts at waypoints of the valid, invalid and
     one-finger plans, against geometry.mechanics.feasible_reference (cvxpy) at margin 0."""
     from geometry import mechanics
-    from ldhp_tamp.validate import _contacts, _Flat, _support
+    from ldhp_tamp.validate import plan_contacts, PlanArrays, _support
 
     for path in (VALID, INVALID, BROKEN / "rule7-unsupported.json", BROKEN / "rule5-sliding-contact.json"):
-        flat = _Flat.of(read_plan(path))
+        flat = PlanArrays.of(read_plan(path))
         verdicts = _support(pick.world, flat).rule7
         for i in range(0, len(flat), 7):
-            c = _contacts(pick.world, flat.take(slice(i, i + 1)))
+            c = plan_contacts(pick.world, flat.take(slice(i, i + 1)))
             on = c.on[0]
             if not on.any():
                 assert not verdicts[i]
@@ -464,7 +464,7 @@ def _balance(step_deg: float, steps: int = 3) -> tuple[Plan, Scenario]:
 def test_a_round_finger_pivoting_about_its_centre_slips(step_deg: float, rules: set[int]) -> None:
     """5 mm x 1 deg = 0.087 mm per motion sticks; 5 mm x 2 deg = 0.175 mm slides, and a
     sliding contact's force is on a cone edge: it cannot hold the corner up vertically."""
-    from ldhp_tamp.validate import _contacts, _Flat, _motion
+    from ldhp_tamp.validate import plan_contacts, PlanArrays, _motion
 
     plan, scenario = _balance(step_deg)
     report = validate_plan(plan, scenario)
@@ -472,8 +472,8 @@ def test_a_round_finger_pivoting_about_its_centre_slips(step_deg: float, rules: 
     if rules:
         assert where(report) == [(8, 0, 0, 2)]
         assert f"finger 1 slips {5 * math.radians(abs(step_deg)):.2f} mm" in report.violations[0].message
-    flat = _Flat.of(plan)
-    c = _contacts(scenario.world, flat)
+    flat = PlanArrays.of(plan)
+    c = plan_contacts(scenario.world, flat)
     mo = _motion(scenario.world, flat, np.arange(len(flat)), c)
     j = int(np.flatnonzero((c.finger == 0) & c.on[0])[0])  # the radial normal at the corner
     # the finite turn: the chord 2 r sin(d/2), whose component along the tangent is r sin d
@@ -495,7 +495,7 @@ def test_a_short_slide_is_checked_sliding(pick: Scenario, plan: Plan, dy: float,
     down, their friction pulls the block down: it falls (rule 8). Sliding up, kinetic
     friction mu N carries it exactly as sticking friction could (valid). Under 0.1 mm
     per motion the pads stick."""
-    from ldhp_tamp.validate import _contacts, _Flat, _motion
+    from ldhp_tamp.validate import plan_contacts, PlanArrays, _motion
 
     slid = _slide(plan, dy)
     report = validate_plan(slid, pick)
@@ -503,9 +503,9 @@ def test_a_short_slide_is_checked_sliding(pick: Scenario, plan: Plan, dy: float,
     if rules:
         assert where(report) == [(8, 3, 0, 2)]
         assert "finger 1 slips 1.00 mm, finger 2 slips 1.00 mm" in report.violations[0].message
-    flat = _Flat.of(slid).take(slice(-4, None))
-    full = _Flat.of(slid)
-    c = _contacts(pick.world, flat)
+    flat = PlanArrays.of(slid).take(slice(-4, None))
+    full = PlanArrays.of(slid)
+    c = plan_contacts(pick.world, flat)
     mo = _motion(pick.world, full, np.arange(len(full) - 4, len(full)), c)
     fingers = c.finger >= 0
     sliding = mo.sliding[:, fingers & c.on[0]]
@@ -518,15 +518,15 @@ def test_a_short_slide_is_checked_sliding(pick: Scenario, plan: Plan, dy: float,
 def test_a_width_change_moves_each_finger_by_half_of_it(pick: Scenario) -> None:
     """A fingertip resting on the block's top face while the gripper closes 1 mm per
     waypoint: finger 1 moves +0.5 mm along the face (slides), the block stays on the table."""
-    from ldhp_tamp.validate import _contacts, _Flat, _motion
+    from ldhp_tamp.validate import plan_contacts, PlanArrays, _motion
 
     wps = tuple(Waypoint(Pose(0.0, 0.0, 0.0), Pose(50.0, 40.0, 0.0), 60.0 - j, ((15.0 + 0.5 * j, 40.0), None))
                 for j in range(4))
     plan = replace(read_plan(VALID), steps=(Step("close", Family.ADJUST_GRASP, {}, ("l1-e1", "l1-e1"), wps),))
     still = variant(lambda t: t.replace("goal = [0, 100, 0]", "goal = [0, 0, 0]"))
     assert validate_plan(plan, still).valid  # the table carries the block: the slip is harmless
-    flat = _Flat.of(plan)
-    c = _contacts(still.world, flat)
+    flat = PlanArrays.of(plan)
+    c = plan_contacts(still.world, flat)
     mo = _motion(still.world, flat, np.arange(4), c)
     j = int(np.flatnonzero((c.finger == 0) & c.on[0])[0])
     # the top face's inward normal is (0, -1), t = (1, 0): the block moves -0.5 mm relative to finger 1
