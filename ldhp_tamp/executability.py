@@ -28,13 +28,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geometry import mechanics
+from geometry import collision, mechanics
 from geometry.forward import MAX_CONTACTS, alternative_motions
 from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
 from geometry.shapes import FloatArray
+from geometry.tolerances import PENETRATION_TOL
 from ldhp_tamp.plan import Plan
 from ldhp_tamp.scenario import Scenario
-from ldhp_tamp.validate import PlanArrays, finger_offsets, plan_contacts, rotate_vectors
+from geometry.world import World
+from ldhp_tamp.validate import PlanArrays, PlanContacts, finger_offsets, plan_contacts, rotate_vectors
 
 __all__ = ["ForwardReport", "forward_check", "SQUEEZE_COS"]
 
@@ -98,6 +100,67 @@ def _velocity(pose0: FloatArray, pose1: FloatArray, points: FloatArray) -> Float
     return np.where(turning[:, None, None], screw, shift)
 
 
+#: How far ahead (finger travel, mm; and waypoints) the fingers must push into an object
+#: that stays put for a planned object motion to be forced (:func:`_object_may_stay`).
+STAY_TRAVEL = 10.0
+_STAY_AHEAD = 8
+
+
+def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: FloatArray, squeeze: BoolArray
+                     ) -> BoolArray:
+    """Waypoints i (before the last) of MoveObject motions at which the object may simply
+    stay: it rests on the environment alone there (full cones, no finger), and over the
+    next waypoints of the step, up to :data:`STAY_TRAVEL` of gripper travel, no finger
+    penetrates the object held at pose i by more than ``PENETRATION_TOL`` (finite
+    motions: a round finger that grazes a corner rolls over it, which the first-order
+    enumeration does not see). A squeezing pinch (``squeeze``) carries the object by its
+    grip force and is not asked."""
+    n = len(flat)
+    rows = np.arange(n - 1)
+    moves = ((np.abs(flat.obj[rows + 1, :2] - flat.obj[rows, :2]).max(axis=1) > _STILL)
+             | (np.abs(wrap_angle(flat.obj[rows + 1, 2] - flat.obj[rows, 2])) * world.object.length_scale > _STILL))
+    moves &= flat.step[rows + 1] == flat.step[rows]
+    out = np.zeros(n, dtype=bool)
+    if not moves.any():
+        return out
+    env = c.on & (c.finger < 0)[None, :]
+    cand = np.flatnonzero(moves & env.any(axis=1) & ~squeeze[rows])
+    if cand.size == 0:
+        return out
+    # rests alone at pose i: the environment contacts present, full cones
+    cnt = env[cand].sum(axis=1)
+    rests = np.zeros(cand.size, dtype=bool)
+    for kc in np.unique(cnt):
+        sel = np.flatnonzero(cnt == kc)
+        cols = np.argsort(~env[cand[sel]], axis=1, kind="stable")[:, :kc]
+        take = lambda a: np.take_along_axis(a[cand[sel]], cols[..., None] if a.ndim == 3 else cols, axis=1)  # noqa: E731
+        rests[sel] = mechanics.feasible_batch(mechanics.Contacts.make(take(c.points), take(c.normals), take(c.mu)),
+                                              com[cand[sel]], world.object.length_scale, margin=0.0)
+    cand = cand[rests]
+    if cand.size == 0:
+        return out
+    # the fingers at the next waypoints against the object held at pose i
+    pushed = np.zeros(cand.size, dtype=bool)
+    travel = np.zeros(cand.size)
+    for j in range(1, _STAY_AHEAD + 1):
+        k = cand + j
+        live = (k < n) & ~pushed
+        live[live] &= flat.step[k[live]] == flat.step[cand[live]]
+        if not live.any():
+            break
+        kk = k[live]
+        travel[live] += np.hypot(*(flat.grip[kk, :2] - flat.grip[kk - 1, :2]).T)
+        live[live] &= travel[live] <= STAY_TRAVEL
+        if not live.any():
+            break
+        kk = k[live]
+        hit = collision.finger_object_overlap(world, flat.obj[cand[live]], flat.grip[kk], flat.width[kk],
+                                              PENETRATION_TOL).any(axis=1)
+        pushed[live] |= hit
+    out[cand[~pushed]] = True
+    return out
+
+
 def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
     """The forward problem at every waypoint of ``plan`` but the last (see the module
     docstring). Waypoints with more than :data:`~geometry.forward.MAX_CONTACTS` contacts
@@ -156,6 +219,13 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
             if first is None or i < first[0]:
                 labels = tuple(c.labels[k] for k in cols[j])
                 first = (i, _describe(labels, res.modes[j], res.twist[j]))
+    stays = _object_may_stay(world, flat, c, com0, squeeze)
+    for i in np.flatnonzero(stays):
+        ambiguous[i] = True
+        if first is None or i < first[0]:
+            first = (int(i), "the fingers' motion over the next waypoints does not push into the object, "
+                             "which rests on the environment alone: it may stay where it is")
+        break
     if first is None:
         return ForwardReport(ambiguous, checked)
     i, why = first

@@ -70,3 +70,14 @@ def test_a_pinch_of_a_gripper_that_closes_is_left_to_the_grip_force() -> None:
     plan = read_plan(SPEC / "pick-plan.json")
     report = forward_check(plan, load_scenario(SPEC / "pick.toml"))
     assert report.ok
+
+
+def test_a_tip_the_fingers_do_not_force_is_refused() -> None:
+    """The concave 11-gon's tip of an earlier planner: finger 1 grazes a corner and rolls
+    over it (0.03 mm of overlap at most), finger 2 leaves: the block may stay standing,
+    which the physics simulation shows (tests/ldhp_tamp/test_simulate.py)."""
+    repo = Path(__file__).resolve().parents[2]
+    plan = read_plan(repo / "tests" / "data" / "sim" / "concave11-tip-plan.json")
+    report = forward_check(plan, load_scenario(repo / "scenarios" / "gen_lift_concave11.toml"))
+    assert not report.ok and report.step == 1 and plan.steps[1].primitive == "tip"
+    assert "may stay where it is" in report.reason
