@@ -257,4 +257,10 @@ def verdict(d: Drawn) -> list[str]:
             for name, poly in d.solids:
                 if _overlaps(placed, shapely.Polygon(poly)):
                     why.append(f"{end} overlaps {name}")
+        # no start_grasp is drawn: a start that touches no solid (within 1 mm) would fall
+        gap = min(shapely.distance(_placed(d.obj, d.start), shapely.Polygon(poly)) for _, poly in d.solids)
+        if abs(gap - 1.0) < 0.05:
+            raise Ambiguous
+        if gap > 1.0:
+            why.append("start touches nothing")
     return why
