@@ -189,6 +189,8 @@ class SuiteEntry:
             return " ".join(self.row.reason.split()) or "(no reason given)"
         if self.validated is False:
             return "the plan does not validate: " + "; ".join(self.problems)
+        if self.row.executes is False:
+            return f"the plan diverges in the physics simulation at step {self.row.diverges_at}"
         return ""
 
 
@@ -429,23 +431,26 @@ def format_suite(entries: Sequence[SuiteEntry], document: Path, stamp: str) -> s
     solved = [e for e in entries if e.row.status is BenchStatus.SOLVED]
     by_status = {s: sum(e.row.status is s for e in entries) for s in BenchStatus}
     counts = ", ".join(f"{n} {s.value}" for s, n in by_status.items() if n and s is not BenchStatus.SOLVED)
-    header = ("| scenario | status | validated | primitives | steps | waypoints | contact states "
+    header = ("| scenario | status | validated | executes in simulation | primitives | steps | waypoints | contact states "
               "| grasp-graph nodes | grasp-graph edges | top iterations | refinements | feasibility checks "
               "| symbolic (s) | streams (s) | grasp graph (s) | total (s) | reason |")
     lines = [
         stamp, "",
         f"{len(entries)} scenario(s): {len(solved)} solved "
-        f"({sum(e.validated is True for e in solved)} validated again)" + (f", {counts}" if counts else "")
+        f"({sum(e.validated is True for e in solved)} validated again, "
+        f"{sum(e.row.executes is True for e in solved)} executing in the physics simulation)"
+        + (f", {counts}" if counts else "")
         + ". The scenario links to its plan file; times are the plan's own per tier "
         "(`stats.time_s`).", "",
         header,
-        "| --- | --- | --- | --- |" + " ---: |" * 12 + " --- |",
+        "| --- | --- | --- | --- | --- |" + " ---: |" * 12 + " --- |",
     ]
     for e in entries:
         r = e.row
         name = f"[{e.stem}]({_link(e.plan_file, document)})" if e.plan_file is not None else e.stem
         lines.append(
-            f"| {name} | {r.status.value} | {_yes_no(e.validated)} | {md_cell(compress_sequence(e.primitives))} "
+            f"| {name} | {r.status.value} | {_yes_no(e.validated)} | {_yes_no(r.executes)} "
+            f"| {md_cell(compress_sequence(e.primitives))} "
             f"| {_count(r.steps)} | {_count(r.waypoints)} | {_count(r.contact_state_nodes)} "
             f"| {_count(r.grasp_graph_nodes)} | {_count(r.grasp_graph_edges)} | {_count(r.top_iterations)} "
             f"| {_count(r.refinements)} | {_count(r.feasibility_checks)} | {_seconds(r.time_symbolic_s)} "
@@ -459,7 +464,7 @@ def format_suite_details(entries: Sequence[SuiteEntry], stamp: str) -> str:
     validated."""
     bad = [e for e in entries if e.reason]
     if not bad:
-        return f"{stamp}\n\nEvery scenario was solved and its plan validated."
+        return f"{stamp}\n\nEvery scenario was solved, its plan validated and executed in the physics simulation."
     lines = [stamp, ""]
     for e in bad:
         status = e.row.status.value if e.row.status is not BenchStatus.SOLVED else "solved, not validated"

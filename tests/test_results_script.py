@@ -159,11 +159,12 @@ def test_suite_table_shortens_reasons_and_details_keep_them_whole(tmp_path: Path
     table = results.format_suite(entries, doc, "STAMP").splitlines()
     ok = next(line for line in table if line.startswith("| [ok](results/plans/ok-plan.json) | solved | yes |"))
     assert "| tip x2, push | 3 |" in ok and "| 1.23 |" in ok
-    bad = next(line for line in table if line.startswith("| bad | failed | - | - | 0 |"))
+    bad = next(line for line in table if line.startswith("| bad | failed | - | - | - | 0 |"))
     cell = bad.rsplit(" | ", 1)[1].rstrip(" |")
     assert cell.endswith("…") and cell.startswith("no contact-state path \\| after")
     assert results.REASON_CELL_CHARS - 5 < len(cell.replace("\\|", "|")) <= results.REASON_CELL_CHARS
-    assert table[2].startswith("3 scenario(s): 2 solved (1 validated again), 1 failed.")
+    assert table[2].startswith("3 scenario(s): 2 solved (1 validated again, 0 executing in the physics simulation), "
+                               "1 failed.")
     details = results.format_suite_details(entries, "STAMP")
     assert f"- `bad` (**failed**, 12.5 s wall): {' '.join(long.split())}" in details
     assert "- `odd` (**solved, not validated**, 12.5 s wall): the plan does not validate: rule 7" in details
@@ -307,16 +308,16 @@ def test_end_to_end_on_the_pick_example(pick_run: tuple[Path, str, str, int],
     suite = after[start:end]
     row = next(line for line in suite.splitlines() if line.startswith("| [example_pick]"))
     cells = [c.strip() for c in row.strip("|").split("|")]
-    assert cells[:4] == ["[example_pick](results/plans/example_pick-plan.json)", "solved", "yes",
+    assert cells[:5] == ["[example_pick](results/plans/example_pick-plan.json)", "solved", "yes", "yes",
                          "approach-contact, air-move"]
-    assert int(cells[4]) == len(plan.steps) and int(cells[5]) == len(plan.waypoints)
-    assert int(cells[11]) == plan.stats.feasibility_checks > 0
-    assert float(cells[15]) == pytest.approx(plan.stats.time_s["total"], abs=0.006)
-    assert cells[16] == ""  # no reason
-    assert "1 scenario(s): 1 solved (1 validated again)" in suite
+    assert int(cells[5]) == len(plan.steps) and int(cells[6]) == len(plan.waypoints)
+    assert int(cells[12]) == plan.stats.feasibility_checks > 0
+    assert float(cells[16]) == pytest.approx(plan.stats.time_s["total"], abs=0.006)
+    assert cells[17] == ""  # no reason
+    assert "1 scenario(s): 1 solved (1 validated again, 1 executing in the physics simulation)" in suite
     assert "| [task2_slot_insertion]" not in suite  # --only limits what is written
     start, end = results.find_block(after, "suite-details")
-    assert "Every scenario was solved and its plan validated." in after[start:end]
+    assert "Every scenario was solved, its plan validated and executed in the physics simulation." in after[start:end]
     start, end = results.find_block(after, "context")
     context = after[start:end]
     assert "--only example_pick --skip-ablation --skip-figures" in context and "Timeout: 60 s" in context
