@@ -199,3 +199,34 @@ def test_a_failing_tip_is_bisected_whether_no_grasp_or_no_reachable_grasp_execut
         out = _bottom_tier(stub, PosePath((seg,)), 2, c, _Clock(), None)
         assert out.steps is None and out.segment is not None and "stub" in out.reason
         assert stub.calls == calls and c.refinements == len(calls) - 1, (seg.primitive, status)
+
+
+def test_solve_simulate_judges_the_plan_in_the_physics_simulation() -> None:
+    result = solve(load_scenario(PICK), SolveOptions(simulate=True))
+    assert result.status is SolveStatus.SOLVED
+    assert result.plan.stats.time_s["simulation"] > 0  # the replay ran and executed
+    assert result.plan.stats.extra["judge_rejections"] == 0
+
+
+def test_a_plan_that_diverges_in_simulation_is_fed_back(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The first plan 'diverges' at its MoveObject step: the grasp carried there leaves the
+    segment's G_m and the path is planned again, with another grasp."""
+    from types import SimpleNamespace
+
+    import ldhp_tamp.simulate as sim
+
+    seen: list[tuple] = []
+
+    def fake(plan, scenario, options=None):
+        carried = next(s for s in plan.steps if s.family.value == "move-object")
+        seen.append(carried.waypoints[0].finger_contacts)
+        if len(seen) == 1:
+            step = plan.steps.index(carried)
+            return SimpleNamespace(executes=False, diverged_step=step, reason="a test's divergence")
+        return SimpleNamespace(executes=True, diverged_step=None, reason="")
+
+    monkeypatch.setattr(sim, "simulate_plan", fake)
+    result = solve(load_scenario(PICK), SolveOptions(simulate=True))
+    assert result.status is SolveStatus.SOLVED
+    assert len(seen) == 2 and seen[0] != seen[1]  # another grasp carries the lift
+    assert result.plan.stats.extra["judge_rejections"] == 1
