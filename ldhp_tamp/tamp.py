@@ -287,7 +287,8 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                 seen_paths.add(key)
                 tried += 1
                 c.pose_paths += 1
-                outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline, judge)
+                outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline, judge,
+                                       options.judge_retries)
                 if outcome.steps is not None:
                     plan = _annotate(Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, outcome.steps,
                                           _stats(engine, c, clock)), scenario)
@@ -404,20 +405,11 @@ class _Judge:
         if not report.valid:
             first = min((v for v in report.violations if v.step is not None), key=lambda v: v.step or 0,
                         default=report.violations[0])
-            step = first.step if first.step is not None else 0
-            self.c.judge_rejections += 1
-            log.info("the bottom tier's plan does not validate (%d violations; first at step %d (%s): %s)",
-                     len(report.violations), step, steps[step].primitive, first.message)
-            return Verdict(step, f"the plan breaks rule {first.rule} at step {step} ({steps[step].primitive}): "
-                                 f"{first.message}")
+            return self._refuse(steps, first.step or 0, f"breaks rule {first.rule}: {first.message}")
         forward = forward_check(plan, self.scenario)
         if not forward.ok:
             assert forward.step is not None
-            self.c.judge_rejections += 1
-            log.info("the bottom tier's plan is ambiguous at step %d (%s): %s", forward.step,
-                     steps[forward.step].primitive, forward.reason)
-            return Verdict(forward.step, f"the commanded motion of step {forward.step} "
-                                         f"({steps[forward.step].primitive}) is ambiguous at {forward.reason}")
+            return self._refuse(steps, forward.step, f"is ambiguous at {forward.reason}")
         if not self.simulate:
             return Verdict()
         from ldhp_tamp.simulate import simulate_plan  # MuJoCo loads only when asked for
@@ -428,9 +420,13 @@ class _Judge:
         if sim.executes:
             return Verdict()
         step = sim.diverged_step if sim.diverged_step is not None else len(steps) - 1
+        return self._refuse(steps, step, f"diverges in the physics simulation: {sim.reason}")
+
+    def _refuse(self, steps: tuple[Step, ...], step: int, why: str) -> Verdict:
         self.c.judge_rejections += 1
-        log.info("the plan diverges in simulation at step %d (%s): %s", step, steps[step].primitive, sim.reason)
-        return Verdict(step, f"the plan diverges in simulation at step {step} ({steps[step].primitive}): {sim.reason}")
+        reason = f"the commanded motion of step {step} ({steps[step].primitive}) {why}"
+        log.info("the judge refuses the bottom tier's plan: %s", reason)
+        return Verdict(step, reason)
 
 
 def _segment_of_step(steps: Sequence[Step], step: int) -> tuple[int, bool]:
