@@ -10,7 +10,8 @@ waypoint; numbers finite; poses ``[x, y, theta]``) and names the file and the JS
 the first problem (``plan.json: steps[2].waypoints[4].gripper: expected [x, y, theta]``).
 The optional ``finger_forces`` of a waypoint is read (and checked) when present and
 written when set. Keys the spec does not name are ignored, except in ``stats``, which
-keeps them.
+keeps them, and ``failure``, this planner's structured account of a failed solve
+(:class:`Failure`), which is read (and checked) when present and written when set.
 Writing is atomic: a temporary file in the target's folder, then :func:`os.replace`.
 """
 
@@ -33,6 +34,9 @@ from ldhp_tamp.primitives.registry import Family  # the one vocabulary of primit
 __all__ = [
     "DECIMALS",
     "PLAN_FORMAT",
+    "Failure",
+    "FailureCause",
+    "FailureTier",
     "Family",
     "Force",
     "Plan",
@@ -147,6 +151,86 @@ class Step:
             raise ValueError("contact_state is a (from, to) pair")
 
 
+class FailureTier(str, enum.Enum):
+    """Where a failed solve failed (``failure.tier`` of a plan file)."""
+
+    SETUP = "setup"  #: before any search: the contact states, the goal's contact pose, the input
+    SYMBOLIC = "symbolic"  #: the contact-state (PDDL) tier found no plan
+    STREAMS = "streams"  #: no object-pose path for the contact-state plan
+    BOTTOM = "bottom"  #: the grasp graph found no grasp sequence
+    JUDGE = "judge"  #: a grasp sequence was found and refused (plan rules, forward problem, simulation)
+    TIMEOUT = "timeout"  #: the ``--timeout`` budget ran out
+
+    def __str__(self) -> str:
+        return self.value
+
+
+class FailureCause(str, enum.Enum):
+    """Why a failed solve failed (``failure.cause``): a closed list, documented in
+    docs/formats/plan.md, "failure"."""
+
+    NO_CONTACT_POSE = "no-contact-pose"  #: Step 1: the start or goal pose touches nothing
+    NO_SYMBOLIC_PLAN = "no-symbolic-plan"  #: no contact-state path (left) from start to goal
+    NO_STREAM_SAMPLE = "no-stream-sample"  #: the streams found no pose path for a planned step
+    EMPTY_MOTION_SET = "empty-motion-set"  #: no grasp executes a segment (its G_m is empty)
+    UNREACHABLE = "unreachable"  #: forward reachability through the grasp graph dies at a segment
+    NO_GRASP_PATH = "no-grasp-path"  #: every G_m is non-empty, but no grasp sequence reaches the goal
+    PLAN_INVALID = "plan-invalid"  #: the judge: the plan breaks a rule of ldhp-plan/1
+    AMBIGUOUS_MOTION = "ambiguous-motion"  #: the judge: the commanded motion has another outcome
+    DIVERGES_IN_SIMULATION = "diverges-in-simulation"  #: the judge: the physics replay diverges
+    TIMEOUT = "timeout"  #: the time budget ran out
+    UNSUPPORTED_INPUT = "unsupported-input"  #: a scenario feature this planner does not handle
+
+    def __str__(self) -> str:
+        return self.value
+
+
+#: At most this many attempts are kept in :attr:`Failure.attempts` (the last ones).
+MAX_ATTEMPTS = 20
+
+
+@dataclass(frozen=True)
+class Failure:
+    """This planner's structured account of a failed solve (``failure`` of a plan file).
+
+    The plan's ``reason`` is a one-line headline; the detail is here.
+
+    Attributes
+    ----------
+    tier : FailureTier
+        Where the solve failed.
+    cause : FailureCause
+        Why, from a closed list.
+    step : int or None
+        The planned contact-state step (0-based index of the symbolic plan's transitions)
+        at which it failed, when there is one.
+    segment : int or None
+        The pose-path segment (after the bisections) at which it failed, when there is one.
+    primitive : str or None
+        The primitive of that step or segment (for the judge: of the plan step it refused).
+    counts : Mapping[str, int]
+        The numbers of the search (``top_iterations``, ``pose_paths``, ``forbidden``,
+        ``refinements``, ``candidates``, ...).
+    attempts : tuple of str
+        What failed, in full, in order: every pose path's failure, the streams' dead ends,
+        the symbolic tier's last word; the last :data:`MAX_ATTEMPTS` of them.
+    """
+
+    tier: FailureTier
+    cause: FailureCause
+    step: int | None = None
+    segment: int | None = None
+    primitive: str | None = None
+    counts: Mapping[str, int] = field(default_factory=dict)
+    attempts: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "tier", FailureTier(self.tier))
+        object.__setattr__(self, "cause", FailureCause(self.cause))
+        object.__setattr__(self, "counts", MappingProxyType({str(k): int(v) for k, v in self.counts.items()}))
+        object.__setattr__(self, "attempts", tuple(str(a) for a in self.attempts)[-MAX_ATTEMPTS:])
+
+
 def _default_times() -> Mapping[str, float]:
     return MappingProxyType({k: 0.0 for k in TIME_KEYS})
 
@@ -175,7 +259,8 @@ class PlanStats:
 
 @dataclass(frozen=True)
 class Plan:
-    """A plan file's content. ``reason`` says why a failed solve failed."""
+    """A plan file's content. ``reason`` says why a failed solve failed (one line);
+    ``failure``, when set, says it in detail (this planner's extension, optional)."""
 
     format: str
     scenario: str
@@ -184,6 +269,7 @@ class Plan:
     steps: tuple[Step, ...]
     stats: PlanStats
     reason: str | None = None
+    failure: Failure | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "status", PlanStatus(self.status))
@@ -305,6 +391,34 @@ class _Reader:
         kwargs["extra"] = {k: v for k, v in d.items() if k not in known}
         return PlanStats(**kwargs)
 
+    def optional_integer(self, d: dict[str, Any], key: str, where: str) -> int | None:
+        value = d.get(key)
+        return None if value is None else self.integer(value, f"{where}.{key}")
+
+    def failure(self, value: Any) -> Failure:
+        d = self.obj(value, "failure")
+        tier = self.string(self.key(d, "tier", "failure"), "failure.tier")
+        if tier not in {t.value for t in FailureTier}:
+            self.fail("failure.tier", f"expected one of {', '.join(t.value for t in FailureTier)}, got {tier!r}")
+        cause = self.string(self.key(d, "cause", "failure"), "failure.cause")
+        if cause not in {c.value for c in FailureCause}:
+            self.fail("failure.cause", f"expected one of {', '.join(c.value for c in FailureCause)}, got {cause!r}")
+        primitive = d.get("primitive")
+        if primitive is not None:
+            primitive = self.string(primitive, "failure.primitive")
+        counts = self.obj(d.get("counts", {}), "failure.counts")
+        attempts = d.get("attempts", [])
+        if not isinstance(attempts, list):
+            self.fail("failure.attempts", f"expected a list, got {_kind(attempts)}")
+        return Failure(
+            tier=FailureTier(tier), cause=FailureCause(cause),
+            step=self.optional_integer(d, "step", "failure"),
+            segment=self.optional_integer(d, "segment", "failure"),
+            primitive=primitive,
+            counts={k: self.integer(v, f"failure.counts.{k}") for k, v in counts.items()},
+            attempts=tuple(self.string(a, f"failure.attempts[{i}]") for i, a in enumerate(attempts)),
+        )
+
     def plan(self, value: Any) -> Plan:
         d = self.obj(value, "")
         fmt = self.string(self.key(d, "format", ""), "format")
@@ -319,7 +433,9 @@ class _Reader:
         steps = self.key(d, "steps", "")
         if not isinstance(steps, list):
             self.fail("steps", f"expected a list, got {_kind(steps)}")
-        ignored = sorted(set(d) - {"format", "scenario", "scenario_sha256", "status", "reason", "steps", "stats"})
+        failure = None if d.get("failure") is None else self.failure(d["failure"])
+        ignored = sorted(set(d) - {"format", "scenario", "scenario_sha256", "status", "reason", "failure",
+                                   "steps", "stats"})
         if ignored:
             log.debug("%s: ignoring unknown keys %s", self.source, ", ".join(ignored))
         return Plan(
@@ -330,6 +446,7 @@ class _Reader:
             steps=tuple(self.step(s, f"steps[{i}]") for i, s in enumerate(steps)),
             stats=self.stats(self.key(d, "stats", "")),
             reason=reason,
+            failure=failure,
         )
 
 
@@ -472,6 +589,11 @@ def _stats_json(s: PlanStats) -> dict[str, Any]:
     return d
 
 
+def _failure_json(f: Failure) -> dict[str, Any]:
+    return {"tier": f.tier.value, "cause": f.cause.value, "step": f.step, "segment": f.segment,
+            "primitive": f.primitive, "counts": dict(f.counts), "attempts": list(f.attempts)}
+
+
 def plan_to_json(plan: Plan) -> str:
     """The text of a plan file: spec key order, degrees, one waypoint per line.
 
@@ -510,7 +632,19 @@ def plan_to_json(plan: Plan) -> str:
                 lines.append('      "waypoints": []')
             lines.append("    }" + ("," if i < len(plan.steps) - 1 else ""))
         lines.append("  ],")
-    lines.append(f'  "stats": {_dump(_stats_json(plan.stats))}')
+    lines.append(f'  "stats": {_dump(_stats_json(plan.stats))}' + ("," if plan.failure is not None else ""))
+    if plan.failure is not None:  # after the spec's keys; one attempt per line
+        f = _failure_json(plan.failure)
+        attempts = f.pop("attempts")
+        lines.append('  "failure": {')
+        lines += [f"    {_dump(k)}: {_dump(v)}," for k, v in f.items()]
+        if attempts:
+            lines.append('    "attempts": [')
+            lines += [f"      {_dump(a)}{',' if j < len(attempts) - 1 else ''}" for j, a in enumerate(attempts)]
+            lines.append("    ]")
+        else:
+            lines.append('    "attempts": []')
+        lines.append("  }")
     lines.append("}")
     return "\n".join(lines) + "\n"
 
