@@ -164,7 +164,10 @@ class GraspPlanResult:
     failing_segment : int or None
         NO_GRASP_FOR_SEGMENT: the first segment whose G_m is empty; NO_PATH: the segment
         at which forward reachability from the start node dies (the last segment when
-        the goal layer is reached but the goal condition cannot be met).
+        the goal layer is reached but the goal condition cannot be met), decided: a path
+        of checked, feasible edges arrives at its first pose and none arrives at its
+        last (unless the check budget ran out: then counting unchecked AdjustGrasp
+        edges as feasible).
     reason : str
         Human-readable: which segment, which primitives, how many grasps were tried and
         why they failed.
@@ -737,6 +740,11 @@ class GraspPlanner:
         else:
             search.rounds += 1
             node_path, edge_path, exhausted = None, [], False
+        if node_path is None and not exhausted:
+            # The reachability above is optimistic: it may run on through unchecked edges
+            # that fail once checked, and the segment it dies at is what the top tier
+            # bisects or forbids. Decide the last layer a feasible path arrives at.
+            reach, exhausted = self._decided_reach(ctx, layers, inter, cands, search, deadline, reach)
         timings["search"] = time.perf_counter() - t0
         checks += search.checks
         nodes = sum(layer.size for layer in layers)
@@ -801,18 +809,21 @@ class GraspPlanner:
     # ---- the lazy shortest-path search -------------------------------------------------
 
     def _search(self, ctx: AdjustContext, layers: list[_Layer], inter: list[FloatArray], cands: list[list[_Cands]],
-                search: _Search, deadline: float | None = None, opt: "_Optimistic | None" = None
+                search: _Search, deadline: float | None = None, opt: "_Optimistic | None" = None,
+                release: bool | None = None
                 ) -> tuple[list[tuple[int, int]] | None, list[Any], list[FloatArray], bool]:
         """LazySP over the layered graph (see :class:`_Optimistic`): returns (the node path
         or None, its edges, the optimistic cost-to-come per layer -- unchecked edges
-        counted as feasible --, whether the check budget ran out)."""
+        counted as feasible --, whether the check budget ran out). ``release``: the goal
+        is {0, 0} at the last layer (default ``goal_release``), else any of its grasps."""
         opts = self.options
+        release = self.goal_release if release is None else release
         lg = [self._layer_graph(c, len(ctx.grasps)) for c in cands]
         start = self._start_index
         exhausted = False
         fresh = opt is None  # else: its edge validity is current, its costs are not
         if opt is None:
-            opt = _Optimistic(layers, inter, lg, start, self.goal_release, opts.max_intra_depth)
+            opt = _Optimistic(layers, inter, lg, start, release, opts.max_intra_depth)
         dirty: set[int] = set(range(len(layers)))
         while True:
             search.rounds += 1
@@ -822,7 +833,7 @@ class GraspPlanner:
             best = float(bwd[0][-1][start])
             if not math.isfinite(best):
                 return None, [], [f[-1] for f in fwd], False
-            nodes, edges = _extract(layers, inter, lg, bwd, start, self.goal_release)
+            nodes, edges = _extract(layers, inter, lg, bwd, start, release)
             unknown = [e for e in edges if e is not None and lg[e[0]].valid(e[1], e[2]) == 0]
             if not unknown:
                 search.cost = best
@@ -839,6 +850,35 @@ class GraspPlanner:
             self._check(ctx, layers, cands, picks, search)
             dirty = {k for k, _ in picks}
         return None, [], [f[-1] for f in fwd], exhausted
+
+    def _decided_reach(self, ctx: AdjustContext, layers: list[_Layer], inter: list[FloatArray],
+                       cands: list[list[_Cands]], search: _Search, deadline: float | None,
+                       reach: list[FloatArray]) -> tuple[list[FloatArray], bool]:
+        """After a search that found no path: the optimistic cost-to-come per layer again,
+        once the last layer that a path of *feasible* edges arrives at is decided.
+
+        ``reach`` counts unchecked edges as feasible, so the layer where it dies may lie
+        beyond every layer a feasible path gets to (the search refutes cheap paths where
+        they meet the goal side, and stops when none is left, leaving the edges that
+        carried them there unchecked). From the last layer ``reach`` gets to down to layer
+        1, each is made the goal (any grasp arriving there) of a LazySP search on the
+        path's first layers, until one is reached. The searches record what they check,
+        so the recomputed cost-to-come arrives at that layer and, as the search of the
+        layer after it ended without an optimistic path, at none after it. Returns it and
+        whether the check budget ran out (then ``reach`` is returned as it was).
+        """
+        last = max((i for i, r in enumerate(reach) if np.isfinite(r).any()), default=0)
+        for j in range(last, 0, -1):
+            found, _, _, exhausted = self._search(ctx, layers[:j + 1], inter[:j], cands[:j + 1], search, deadline,
+                                                  release=False)
+            if exhausted:
+                return reach, True
+            if found is not None:
+                break
+        lg = [self._layer_graph(c, len(ctx.grasps)) for c in cands]
+        opt = _Optimistic(layers, inter, lg, self._start_index, self.goal_release, self.options.max_intra_depth)
+        opt.refresh(range(len(layers)))
+        return [f[-1] for f in opt.forward(0)], False
 
     def _layer_graph(self, cands: Sequence[_Cands], size: int) -> _LayerGraph:
         """The :class:`_LayerGraph` of one layer's candidates (cached while they are:

@@ -194,6 +194,31 @@ def test_no_path_names_the_segment_where_reachability_dies():
     assert "does not rest" in res.reason
 
 
+def test_no_path_names_the_segment_a_feasible_path_cannot_pass_not_where_optimism_stops():
+    # The ceiling path again, with every approach refused when checked: no grasp gets
+    # onto the block, so nothing lifts it (segment 0). Counting unchecked edges as
+    # feasible, reachability runs on to T_1 and dies at segment 1, and no search is
+    # needed to see that no path exists; the failing segment (which the top tier
+    # bisects or forbids) must be the one where a path of feasible edges stops.
+    ceiling = '[[environment.solids]]\nname = "ceiling"\nvertices = [[150, 142], [400, 142], [400, 200], [150, 200]]'
+    sc = scenario("ceiling", "[200, 100, 0]", extra=ceiling)
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=K))
+    up = lift(world, sc.start, 100.0)
+    under = segment(world, "air-move", translate(up.end, (1.0, 0.0)), 200.0)
+    veto = VetoApproach(set(range(len(grasps))))
+    binds = [Binding(b.name, b.family, veto) if b.name == "approach-contact" else b for b in bindings()]
+    res = GraspPlanner(world, grasps, binds).plan(PosePath((up, under)))
+    assert res.status is GraspPlanStatus.NO_PATH, res.reason
+    assert res.failing_segment == 0, res.reason
+    assert veto.asked  # the approaches were checked (and refused)
+    assert "forward reachability dies at segment 0 (air-move l1-e3 -> free)" in res.reason
+    assert "approach-contact 0 feasible of" in res.reason
+    # Without the veto the same path dies at segment 1, after grasps got onto the block.
+    free = GraspPlanner(world, grasps, bindings()).plan(PosePath((up, under)))
+    assert free.status is GraspPlanStatus.NO_PATH and free.failing_segment == 1
+
+
 def test_a_start_grasp_off_the_grid_is_added_and_released_at_the_goal():
     # Held by its ends, pushed 30 mm along the table, released.
     sc = scenario("held", "[30, 0, 0]", task="start_grasp = { gripper = [50, 5, 0], width = 100 }\ngoal_release = true")
