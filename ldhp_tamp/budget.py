@@ -1,6 +1,7 @@
 """Time budgets: one deadline for a whole solve, checked cheaply wherever the search loops.
 
-A deadline is a :func:`time.perf_counter` value, or ``None`` for no limit. Stages that
+A deadline is a value of :data:`clock` (by default :func:`time.perf_counter`), or ``None``
+for no limit. Stages that
 loop (the top-tier iterations, the streams, the grasp-graph search) call :func:`check`,
 which raises :class:`~ldhp_tamp.errors.TimeBudgetExceeded` once it has passed; the TAMP
 loop turns that into a failed result (reason ``timeout: ...``). The symbolic engine call
@@ -11,6 +12,13 @@ own: :func:`alarm` is the backstop, a timer signal that raises the same exceptio
 whatever Python code runs :data:`ALARM_GRACE_S` after the deadline; while it is armed
 (:func:`alarm_armed`) the TAMP loop runs a pure-Python engine in its own process, which
 the signal interrupts like any other code.
+
+Every reading of the time that a budget depends on goes through :data:`clock`: the checks,
+:class:`Budget`, the solve's timings (:mod:`ldhp_tamp.tamp`) and the wait for the engine's
+child process (:mod:`ldhp_tamp.symbolic`). A test replaces it
+(``monkeypatch.setattr(budget, "clock", fake)``) to make a budget run out at a chosen point
+of the solve, whatever the machine's load; :func:`alarm`, a real-time timer, is armed only
+on the real clock.
 
 >>> b = Budget.of(None)
 >>> b.deadline is None and not b.expired() and b.remaining() is None
@@ -27,11 +35,15 @@ import threading
 import time
 from dataclasses import dataclass, field
 from types import FrameType
-from typing import Iterator
+from typing import Callable, Iterator
 
 from ldhp_tamp.errors import TimeBudgetExceeded
 
-__all__ = ["ALARM_GRACE_S", "Budget", "alarm", "alarm_armed", "check", "expired", "remaining"]
+__all__ = ["ALARM_GRACE_S", "Budget", "alarm", "alarm_armed", "check", "clock", "expired", "remaining"]
+
+#: The clock every deadline is read on: seconds, never decreasing. Read it as
+#: ``budget.clock()`` (the module attribute, so that a replacement reaches every reader).
+clock: Callable[[], float] = time.perf_counter
 
 #: How long after the deadline :func:`alarm` interrupts: the cooperative checks, which
 #: name their stage precisely, normally come first.
@@ -39,15 +51,15 @@ ALARM_GRACE_S = 0.25
 
 
 def expired(deadline: float | None) -> bool:
-    """Whether ``deadline`` (a :func:`time.perf_counter` value, or ``None``) has passed."""
-    return deadline is not None and time.perf_counter() >= deadline
+    """Whether ``deadline`` (a :data:`clock` value, or ``None``) has passed."""
+    return deadline is not None and clock() >= deadline
 
 
 def remaining(deadline: float | None) -> float | None:
     """Seconds left until ``deadline`` (never negative), or ``None`` for no limit."""
     if deadline is None:
         return None
-    return max(0.0, deadline - time.perf_counter())
+    return max(0.0, deadline - clock())
 
 
 def check(deadline: float | None, where: str) -> None:
@@ -55,7 +67,7 @@ def check(deadline: float | None, where: str) -> None:
 
     Costs one clock read; call it once per iteration of a loop, not per element.
     """
-    if deadline is not None and time.perf_counter() >= deadline:
+    if deadline is not None and clock() >= deadline:
         raise TimeBudgetExceeded(where)
 
 
@@ -68,11 +80,11 @@ class Budget:
     seconds
         The budget as given (``--timeout``).
     start
-        When it started, a :func:`time.perf_counter` value.
+        When it started, a :data:`clock` value (default: now).
     """
 
     seconds: float | None
-    start: float = field(default_factory=time.perf_counter)
+    start: float = field(default_factory=lambda: clock())
 
     def __post_init__(self) -> None:
         if self.seconds is not None and not self.seconds >= 0:
@@ -85,7 +97,7 @@ class Budget:
 
     @property
     def deadline(self) -> float | None:
-        """The :func:`time.perf_counter` value at which the budget runs out."""
+        """The :data:`clock` value at which the budget runs out."""
         return None if self.seconds is None else self.start + self.seconds
 
     def expired(self) -> bool:
@@ -104,14 +116,15 @@ def alarm(deadline: float | None, grace: float = ALARM_GRACE_S) -> Iterator[None
 
     A backstop for stages without :func:`check` calls. It uses ``SIGALRM`` and a real-time
     interval timer, so it is active only in the main thread, where the platform has them
-    and when no other ``SIGALRM`` handler is installed; otherwise the body runs without it.
+    and when no other ``SIGALRM`` handler is installed, and only on the real :data:`clock`
+    (a timer cannot follow a test's fake one); otherwise the body runs without it.
     The previous handler is restored and the timer cleared on exit. (A forked child does
     not inherit the timer.) A long call into compiled code is interrupted when it returns.
     The timer fires again every ``grace`` seconds until the body exits: Python swallows an
     exception raised while a garbage-collector callback or a finaliser runs, and a
     one-shot alarm landing there would be lost.
     """
-    usable = (deadline is not None and hasattr(signal, "setitimer")
+    usable = (deadline is not None and clock is time.perf_counter and hasattr(signal, "setitimer")
               and threading.current_thread() is threading.main_thread()
               and signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None))
     if not usable:

@@ -14,6 +14,7 @@ import sys
 import traceback
 from typing import Callable, Sequence
 
+from ldhp_tamp import budget
 from ldhp_tamp.errors import InputError
 
 log = logging.getLogger("ldhp_tamp")
@@ -101,15 +102,17 @@ def cmd_solve(args: argparse.Namespace) -> int:
     """Plan for a scenario; write the plan (solved or failed) and print a summary."""
     from pathlib import Path
 
-    from ldhp_tamp.plan import write_plan
     from ldhp_tamp.scenario import load_scenario
-    from ldhp_tamp.tamp import SolveOptions, solve
 
     scenario = load_scenario(args.scenario, strict=args.strict)
     out = Path(args.out) if args.out else Path(f"{scenario.name}-plan.json")
     if not out.resolve().parent.is_dir():  # before the search, not after it
         raise InputError(f"{out}: --out: no such directory: {out.resolve().parent}")
+    # the planner's imports (unified-planning, scipy, ...) only for a scenario that loads
+    from ldhp_tamp.plan import write_plan
+    from ldhp_tamp.tamp import SolveOptions, solve
     options = SolveOptions(engine=args.engine, seed=args.seed, timeout=args.timeout,
+                           started=getattr(args, "started", None),  # --timeout counts from main()
                            emit_pddl=Path(args.emit_pddl) if args.emit_pddl else None,
                            simulate=args.simulate)
     quiet = args.quiet
@@ -335,7 +338,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, metavar="N", help="random seed (default: the scenario's)")
     p.add_argument("--emit-pddl", metavar="DIR", help="write the domain and one problem per top-tier iteration")
     p.add_argument("--timeout", type=_seconds, metavar="SECONDS",
-                   help="wall-time budget of the whole solve (both tiers, every engine); when it runs "
+                   help="wall-time budget of the whole command, counted from its start (loading the "
+                        "scenario, both tiers, every engine); when it runs "
                         "out the plan has status 'failed', a reason starting 'timeout' and the "
                         "statistics so far, and the exit status is 1 (default: no limit)")
     p.add_argument("--simulate", action="store_true",
@@ -435,8 +439,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    started = budget.clock()  # a solve's --timeout counts from here, loading included
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.started = started
     # -v: the planner's INFO records; -vv: its DEBUG records and the engines' own progress
     # (pyperplan logs on the root logger, a dozen lines per solve).
     logging.basicConfig(

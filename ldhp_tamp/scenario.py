@@ -649,14 +649,17 @@ def _read_planner(r: _Reader, t: Mapping[str, Any], base_dir: Path, check: bool)
         domain_path = find_domain(domain, base_dir)
         if domain_path is None:
             raise r.fail("planner.domain", _unknown_domain(domain, base_dir))
-        # Imported here: only ldhp_tamp.symbolic imports unified-planning, and loading it
-        # is slow; every cheaper check has run by now.
-        from ldhp_tamp.symbolic import available_engines
+        # The usual engines are known without importing unified-planning (over a second);
+        # any other name is looked up by ldhp_tamp.symbolic, the module that imports it.
+        from ldhp_tamp.engine_names import installed_planners
 
-        engines = tuple(available_engines())
-        if engine not in engines:
-            raise r.fail("planner.engine", f"unknown engine {engine!r} "
-                                           f"(installed: {', '.join(engines) or 'none'})")
+        if engine not in installed_planners():
+            from ldhp_tamp.symbolic import available_engines
+
+            engines = tuple(available_engines())
+            if engine not in engines:
+                raise r.fail("planner.engine", f"unknown engine {engine!r} "
+                                               f"(installed: {', '.join(engines) or 'none'})")
     return PlannerSettings(domain=domain, engine=engine, samples_per_edge=k,
                            max_top_iterations=counts["max_top_iterations"],
                            max_refinements=counts["max_refinements"], seed=seed,

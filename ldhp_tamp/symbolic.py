@@ -43,14 +43,17 @@ import warnings
 from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import unified_planning.model as up_model
-from unified_planning.engines import PlanGenerationResult, PlanGenerationResultStatus
-from unified_planning.environment import Environment
+from unified_planning.environment import Environment, get_environment
 from unified_planning.io import PDDLReader, PDDLWriter
-from unified_planning.shortcuts import get_environment
+
+if TYPE_CHECKING:  # unified_planning.engines imports every installed engine (ConfigSpace, scipy)
+    from unified_planning.engines import PlanGenerationResult
 
 from geometry.features import ContactState
+from ldhp_tamp import budget
 from ldhp_tamp.errors import DomainError, EngineError, TimeBudgetExceeded
 from ldhp_tamp.primitives.registry import (
     ActionInfo,
@@ -622,16 +625,17 @@ class SymbolicStatus(enum.Enum):
     """The engine failed, or reported the problem unsupported."""
 
 
+#: unified-planning's ``PlanGenerationResultStatus``, by member name.
 _STATUS = {
-    PlanGenerationResultStatus.SOLVED_SATISFICING: SymbolicStatus.SOLVED,
-    PlanGenerationResultStatus.SOLVED_OPTIMALLY: SymbolicStatus.SOLVED,
-    PlanGenerationResultStatus.UNSOLVABLE_PROVEN: SymbolicStatus.UNSOLVABLE,
-    PlanGenerationResultStatus.UNSOLVABLE_INCOMPLETELY: SymbolicStatus.NOT_FOUND,
-    PlanGenerationResultStatus.TIMEOUT: SymbolicStatus.TIMEOUT,
-    PlanGenerationResultStatus.MEMOUT: SymbolicStatus.MEMOUT,
-    PlanGenerationResultStatus.INTERNAL_ERROR: SymbolicStatus.ERROR,
-    PlanGenerationResultStatus.UNSUPPORTED_PROBLEM: SymbolicStatus.ERROR,
-    PlanGenerationResultStatus.INTERMEDIATE: SymbolicStatus.ERROR,
+    "SOLVED_SATISFICING": SymbolicStatus.SOLVED,
+    "SOLVED_OPTIMALLY": SymbolicStatus.SOLVED,
+    "UNSOLVABLE_PROVEN": SymbolicStatus.UNSOLVABLE,
+    "UNSOLVABLE_INCOMPLETELY": SymbolicStatus.NOT_FOUND,
+    "TIMEOUT": SymbolicStatus.TIMEOUT,
+    "MEMOUT": SymbolicStatus.MEMOUT,
+    "INTERNAL_ERROR": SymbolicStatus.ERROR,
+    "UNSUPPORTED_PROBLEM": SymbolicStatus.ERROR,
+    "INTERMEDIATE": SymbolicStatus.ERROR,
 }
 
 # up-pyperplan 1.1 compares its search *function* with search names when no plan is
@@ -784,7 +788,7 @@ class _Answer:
     boundary): the status, the plan's ``(action, argument names)`` (``None`` without a
     plan), the engine's last log line and the warnings it raised."""
 
-    status: PlanGenerationResultStatus
+    status: str  # the name of unified-planning's PlanGenerationResultStatus
     actions: tuple[tuple[str, tuple[str, ...]], ...] | None
     last_log: str
     warnings: tuple[str, ...] = ()
@@ -877,7 +881,7 @@ def _run_engine(problem: SymbolicProblem, engine: str, timeout_s: float | None) 
     actions = None if answer.plan is None else tuple(
         (ai.action.name, tuple(p.object().name for p in ai.actual_parameters))
         for ai in answer.plan.actions)
-    return _Answer(answer.status, actions, _last_log(answer), tuple(str(w.message) for w in caught))
+    return _Answer(answer.status.name, actions, _last_log(answer), tuple(str(w.message) for w in caught))
 
 
 def _run_engine_in_child(problem: SymbolicProblem, engine: str, timeout_s: float) -> _Answer:
@@ -886,8 +890,8 @@ def _run_engine_in_child(problem: SymbolicProblem, engine: str, timeout_s: float
     ``timeout_s`` passes. A bare :func:`os.fork` rather than :mod:`multiprocessing`: the
     overhead per call is about 20 ms instead of 60 (see ``tests/ldhp_tamp/test_budget.py``)."""
     if timeout_s <= 0:
-        return _Answer(PlanGenerationResultStatus.TIMEOUT, None, "no time left")
-    deadline = time.perf_counter() + timeout_s
+        return _Answer("TIMEOUT", None, "no time left")
+    deadline = budget.clock() + timeout_s  # the solve's clock, which a test may replace
     read_end, write_end = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child: never returns
@@ -900,10 +904,10 @@ def _run_engine_in_child(problem: SymbolicProblem, engine: str, timeout_s: float
     chunks: list[bytes] = []
     finished = False
     try:
-        while (left := deadline - time.perf_counter()) > 0:
+        while (left := deadline - budget.clock()) > 0:
             ready, _, _ = select.select([read_end], [], [], left)
             if not ready:
-                break
+                continue  # the deadline is the budget's clock's, read again
             chunk = os.read(read_end, 1 << 16)
             if not chunk:
                 finished = True
@@ -918,7 +922,7 @@ def _run_engine_in_child(problem: SymbolicProblem, engine: str, timeout_s: float
                 os.kill(pid, signal.SIGKILL)
         _, wait_status = os.waitpid(pid, 0)
     if not finished:
-        return _Answer(PlanGenerationResultStatus.TIMEOUT, None, f"killed after {timeout_s:.3g} s")
+        return _Answer("TIMEOUT", None, f"killed after {timeout_s:.3g} s")
     if not chunks:
         raise RuntimeError(f"the engine's process died ({_exit_description(wait_status)})")
     kind, payload = pickle.loads(b"".join(chunks))
@@ -966,7 +970,7 @@ def _result(problem: SymbolicProblem, answer: _Answer, engine: str,
         SymbolicStatus.TIMEOUT: f"{engine} hit the time limit of {timeout_s or 0:.3g} s after "
                                 f"{elapsed:.3g} s",
         SymbolicStatus.MEMOUT: f"{engine} ran out of memory",
-    }.get(status, f"{engine} reported {answer.status.name}: {answer.last_log}")
+    }.get(status, f"{engine} reported {answer.status}: {answer.last_log}")
     log.info("%s", reason)
     return SymbolicResult(status, (), reason, elapsed, engine)
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 import contextlib
 import enum
 import logging
-import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -64,6 +63,10 @@ class SolveOptions:
     timeout: float | None = None
     """Wall-time budget of the whole solve in seconds (both tiers, every engine); when it
     runs out the solve fails with a reason starting ``timeout``. ``None``: no limit."""
+    started: float | None = None
+    """When the solve's time starts, a :data:`ldhp_tamp.budget.clock` value: the command's
+    start for ``ldhp-tamp solve`` (so that loading the scenario counts too, in the budget
+    and in the plan's ``time_s``); ``None``: the call of :func:`solve`."""
     domain: Path | None = None  # a .pddl file used instead of the scenario's domain (ablate)
     simulate: bool = False
     """Judge every plan the bottom tier finds in the physics simulation too
@@ -87,13 +90,13 @@ class _Clock:
     grasp_graph: float = 0.0
     setup: float = 0.0
     simulation: float = 0.0
-    start: float = field(default_factory=time.perf_counter)
+    start: float = field(default_factory=lambda: budget.clock())
 
     def as_dict(self) -> dict[str, float]:
         return {"symbolic": round(self.symbolic, 4), "streams": round(self.streams, 4),
                 "grasp_graph": round(self.grasp_graph, 4), "setup": round(self.setup, 4),
                 **({"simulation": round(self.simulation, 4)} if self.simulation else {}),
-                "total": round(time.perf_counter() - self.start, 4)}
+                "total": round(budget.clock() - self.start, 4)}
 
 
 @dataclass(frozen=True)
@@ -159,7 +162,7 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     InputError
         Unusable domain or engine (checked before any search).
     """
-    clock = _Clock()
+    clock = _Clock() if options.started is None else _Clock(start=options.started)
     c = _Counters()
     deadline = Budget(options.timeout, clock.start).deadline
     try:
@@ -167,7 +170,7 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
             return _solve(scenario, options, progress, c, clock, deadline)
     except TimeBudgetExceeded as exc:
         if c.top_iterations == 0:
-            clock.setup = time.perf_counter() - clock.start
+            clock.setup = budget.clock() - clock.start
         return _failed(scenario, options.engine or scenario.settings.engine,
                        f"timeout: the {options.timeout:g} s budget ran out in {exc.where}; "
                        f"{c.top_iterations} top-tier iteration(s), {c.pose_paths} pose path(s) tried", c, clock)
@@ -175,7 +178,7 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
 
 def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], None] | None,
            c: _Counters, clock: _Clock, deadline: float | None) -> SolveResult:
-    """:func:`solve` within a deadline (a :func:`time.perf_counter` value or ``None``);
+    """:func:`solve` within a deadline (a :data:`ldhp_tamp.budget.clock` value or ``None``);
     raises :class:`TimeBudgetExceeded` when it passes."""
     settings = scenario.settings
     engine = options.engine or settings.engine
@@ -212,7 +215,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
     grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release,
                                  GraspGraphOptions(helper=options.helpers))
-    clock.setup = time.perf_counter() - clock.start
+    clock.setup = budget.clock() - clock.start
     budget.check(deadline, "the setup (contact-state graph, admissible transitions)")
     say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
         f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
@@ -227,7 +230,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
             c.top_iterations = iteration
             budget.check(deadline, f"the top tier, before iteration {iteration}")
             # ---- top tier, step 2: contact-state plan -------------------------------------
-            t0 = time.perf_counter()
+            t0 = budget.clock()
             allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in forbidden)
                        for a, pairs in transitions.items()}
             keep = relevant_states(ctx, allowed)
@@ -248,7 +251,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                 raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({engine} hit the time "
                                          f"limit, interrupted by the budget's alarm in {exc.where})") from exc
             finally:
-                clock.symbolic += time.perf_counter() - t0
+                clock.symbolic += budget.clock() - t0
             if sres.status is symbolic.SymbolicStatus.TIMEOUT and deadline is not None:
                 raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({sres.reason})")
             if not sres.solved:
@@ -273,11 +276,11 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
             failed_step: int | None = None
             tried = 0
             while tried < options.pose_paths_per_plan:
-                ts = time.perf_counter()
+                ts = budget.clock()
                 try:
                     path = search.next(failed_step)
                 finally:  # a timeout's time counts too
-                    clock.streams += time.perf_counter() - ts
+                    clock.streams += budget.clock() - ts
                 if path is None:
                     break
                 key = b"".join(seg.primitive.encode() + np.asarray(seg.poses).tobytes() for seg in path.segments)
@@ -414,9 +417,9 @@ class _Judge:
             return Verdict()
         from ldhp_tamp.simulate import simulate_plan  # MuJoCo loads only when asked for
 
-        t0 = time.perf_counter()
+        t0 = budget.clock()
         sim = simulate_plan(plan, self.scenario)
-        self.clock.simulation += time.perf_counter() - t0
+        self.clock.simulation += budget.clock() - t0
         if sim.executes:
             return Verdict()
         step = sim.diverged_step if sim.diverged_step is not None else len(steps) - 1
@@ -467,11 +470,11 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
     refinements = 0
     rejected = 0
     while True:
-        t0 = time.perf_counter()
+        t0 = budget.clock()
         try:
             res = planner.plan(PosePath(tuple(segments)), deadline=deadline)
         finally:  # a timeout's time counts too
-            clock.grasp_graph += time.perf_counter() - t0
+            clock.grasp_graph += budget.clock() - t0
         c.feasibility_checks += res.feasibility_checks
         c.grasp_graph_nodes = res.nodes
         c.grasp_graph_edges = res.edges

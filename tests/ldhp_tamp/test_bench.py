@@ -83,9 +83,9 @@ def test_a_run_over_the_hard_limit_is_a_timeout_row(tmp_path: Path) -> None:
     elapsed = time.monotonic() - t0
     assert row.status is BenchStatus.TIMEOUT and "hard limit" in row.reason
     assert row.time_total_s is None and row.steps is None
-    # task 1 takes seconds; stopping the worker took less than the SIGTERM wait plus the
-    # forkserver's start (when this test runs first)
-    assert elapsed < 10
+    # task 1 takes seconds; the worker was stopped rather than left to finish (a hang
+    # guard: the SIGTERM wait and the forkserver's start take longer on a busy machine)
+    assert elapsed < 60
     rows, files = run_bench([TASK1], options, tmp_path)
     assert [r.status for r in rows] == [BenchStatus.TIMEOUT]
     assert "| task1-zero-mobility-lift | pyperplan | 100 | 1 | 0 | - | 0% | 1 | 0 |" in files.summary.read_text()

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from geometry.world import PolylineGripper, TwoPointGripper
-from ldhp_tamp import resources
+from ldhp_tamp import engine_names, resources
 from ldhp_tamp.errors import InputError, ScenarioError
 from ldhp_tamp.scenario import (
     PlannerSettings,
@@ -48,6 +48,7 @@ def fake_planning(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.
     fake = types.ModuleType("ldhp_tamp.symbolic")
     fake.available_engines = lambda: FAKE_ENGINES  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ldhp_tamp.symbolic", fake)
+    monkeypatch.setattr(engine_names, "installed_planners", lambda: ())  # always ask the fake
     return domains
 
 
