@@ -12,10 +12,13 @@ import logging
 import math
 import sys
 import traceback
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from ldhp_tamp import budget
 from ldhp_tamp.errors import InputError
+
+if TYPE_CHECKING:  # the commands import what they need when they run
+    from ldhp_tamp.plan import Failure
 
 log = logging.getLogger("ldhp_tamp")
 
@@ -136,11 +139,26 @@ def cmd_solve(args: argparse.Namespace) -> int:
               + (", executes in simulation)" if args.simulate else ")"))
     else:
         print(f"  reason: {result.reason}")
+        if args.verbose and result.plan.failure is not None:  # -v: the whole failure
+            _print_failure(result.plan.failure)
     print(f"  contact states: {stats.contact_state_nodes}, grasp graph: {stats.grasp_graph_nodes} nodes, "
           f"{stats.grasp_graph_edges} edges, top iterations: {stats.top_iterations}, "
           f"refinements: {stats.refinements}, feasibility checks: {stats.feasibility_checks}")
     print(f"  time: {times}")
     return EXIT_OK if result.solved else EXIT_NO_PLAN
+
+
+def _print_failure(failure: Failure) -> None:
+    """The failure of a failed plan, every attempt on a line of its own (``solve -v``)."""
+    where = ", ".join(f"{k} {v}" for k, v in (("step", failure.step), ("segment", failure.segment),
+                                                ("primitive", failure.primitive)) if v is not None)
+    print(f"  failure: tier {failure.tier.value}, cause {failure.cause.value}" + (f", {where}" if where else ""))
+    print("  counts: " + ", ".join(f"{k} {v}" for k, v in failure.counts.items()))
+    total = failure.counts.get("attempts", len(failure.attempts))
+    print(f"  attempts ({len(failure.attempts)}" + (f", the last of {total}" if total > len(failure.attempts) else "")
+          + "):")
+    for i, attempt in enumerate(failure.attempts, start=1):
+        print(f"    {i}. {attempt}")
 
 
 def _seconds(text: str) -> float:
@@ -346,6 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="judge every plan found in the physics simulation too (ldhp-tamp simulate): a plan "
                         "that diverges is fed back like one that fails validation and the search goes on")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
+    p.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                   help="as 'ldhp-tamp -v solve': the planner's progress on stderr and, for a failed "
+                        "solve, the whole failure (tier, cause, counts, every attempt)")
     _add_strict(p)
 
     p = sub.add_parser("bench", help="benchmark: every scenario x engine x K x seed, in worker processes",
@@ -393,7 +414,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="domain to ablate: a name in domains/ or a .pddl file (default: the scenarios' own)")
     p.add_argument("--remove", type=_comma_names, metavar="A,B",
                    help="remove only these actions, one at a time (default: every action of the domain)")
-    p.add_argument("--csv", metavar="FILE", help="also write the table as CSV: removed,scenario,feasible")
+    p.add_argument("--csv", metavar="FILE", help="also write the table as CSV: removed,scenario,feasible,reason,time_s")
     p.add_argument("--timeout", type=float, metavar="S",
                    help="seconds per solve, if the planner has a timeout option (else ignored, with a warning)")
     p.add_argument("--jobs", type=int, default=1, metavar="J", help="solves at once, in worker processes (default 1)")

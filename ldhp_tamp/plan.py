@@ -33,6 +33,7 @@ from ldhp_tamp.primitives.registry import Family  # the one vocabulary of primit
 
 __all__ = [
     "DECIMALS",
+    "MAX_ATTEMPTS",
     "PLAN_FORMAT",
     "Failure",
     "FailureCause",

@@ -10,7 +10,8 @@ when none is left the failing transitions go back to the symbolic tier as constr
 (their static facts are removed) and the loop re-plans (up to H_max iterations).
 
 A solve never raises for an impossible task: it returns a :class:`SolveResult` with status
-``failed`` and a reason naming the tier and the cause. Bad input raises
+``failed``, a one-line reason naming the tier, the step and the cause, and the detail as a
+:class:`~ldhp_tamp.plan.Failure` in the plan (every attempt that failed). Bad input raises
 :class:`~ldhp_tamp.errors.InputError` before any search.
 """
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import enum
 import logging
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -31,9 +33,9 @@ from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
 from ldhp_tamp.errors import TimeBudgetExceeded
 from ldhp_tamp.executability import forward_check
-from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanStatus
+from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanResult, GraspPlanStatus
 from ldhp_tamp.path import Segment
-from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Plan, PlanStats, PlanStatus, Step
+from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Failure, FailureCause, FailureTier, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family
 from ldhp_tamp.primitives.registry import Sequel, Transition
 from ldhp_tamp.scenario import Scenario
@@ -112,8 +114,63 @@ class SolveResult:
         return self.status is SolveStatus.SOLVED
 
 
+#: The longest headline (a failed solve's ``reason``), in characters, give or take the
+#: names of a segment's contact states; the detail is in the plan's ``failure``.
+HEADLINE_MAX = 200
+
+
+@dataclass(frozen=True)
+class _Attempt:
+    """One failure on the way to a plan: in full (``text``, one line of the plan's
+    ``failure.attempts``) and in structure (``where`` and ``what`` make its headline)."""
+
+    text: str
+    tier: FailureTier
+    cause: FailureCause
+    where: str = ""  # "bottom tier, step 3, segment 5 (tip l2-e1 -> v3-e1)"
+    what: str = ""  # "no grasp executes it (1039 candidates)"
+    step: int | None = None  # the planned contact-state step
+    segment: int | None = None  # the pose-path segment (after bisections)
+    primitive: str | None = None
+    candidates: int | None = None  # the grasps tried on the segment, when known
+
+    @property
+    def headline(self) -> str:
+        return f"{self.where}: {self.what}" if self.where else self.what
+
+
+def _short(text: str, limit: int = HEADLINE_MAX) -> str:
+    """``text`` when it has at most ``limit`` characters; otherwise its first clause
+    without its parenthesised detail, cut at a word (``...``) if still too long."""
+    if len(text) <= limit:
+        return text
+    kept: list[str] = []
+    depth = 0
+    for ch in text:
+        if ch == "(":
+            depth += 1
+        elif ch == ")" and depth:
+            depth -= 1
+        elif depth == 0:
+            kept.append(ch)
+    brief = re.sub(r"\s+", " ", "".join(kept)).replace(" ,", ",").replace(" ;", ";").replace(" :", ":")
+    brief = brief.strip().split("; ")[0]
+    if len(brief) > limit:
+        brief = brief[:max(limit - 3, 1)].rsplit(" ", 1)[0] + "..."
+    return brief
+
+
+def _where(tier: str, seg: Segment, k: int) -> str:
+    """How a headline names segment ``k`` of a pose path: ``bottom tier, step 3, segment 5
+    (tip l2-e1 -> v3-e1)`` (the planned step when known)."""
+    step = f", step {seg.step}" if seg.step >= 0 else ""
+    return f"{tier}{step}, segment {k} ({seg.primitive} {seg.from_state.name} -> {seg.to_state.name})"
+
+
 @dataclass
 class _Counters:
+    attempts: list[_Attempt] = field(default_factory=list)  # every failure so far, in order
+    forbidden: int = 0  # transitions and sequels forbidden to the symbolic tier
     top_iterations: int = 0
     refinements: int = 0
     feasibility_checks: int = 0
@@ -132,10 +189,39 @@ def _stats(engine: str, c: _Counters, clock: _Clock) -> PlanStats:
                      extra={"pose_paths": c.pose_paths, "judge_rejections": c.judge_rejections})
 
 
-def _failed(scenario: Scenario, engine: str, reason: str, c: _Counters, clock: _Clock) -> SolveResult:
+def _failed(scenario: Scenario, engine: str, failure: _Attempt, c: _Counters, clock: _Clock,
+            headline: str | None = None) -> SolveResult:
+    """A failed result: ``headline`` (default: ``failure``'s) is the reason; the plan's
+    ``failure`` has ``failure``'s tier, cause and place, the counts and every attempt."""
+    if failure not in c.attempts:
+        c.attempts.append(failure)
+    reason = headline or failure.headline
     log.info("failed: %s", reason)
-    plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.FAILED, (), _stats(engine, c, clock), reason)
+    counts = {"top_iterations": c.top_iterations, "pose_paths": c.pose_paths, "forbidden": c.forbidden,
+              "refinements": c.refinements, "judge_rejections": c.judge_rejections, "attempts": len(c.attempts)}
+    if failure.candidates is not None:
+        counts["candidates"] = failure.candidates
+    detail = Failure(failure.tier, failure.cause, failure.step, failure.segment, failure.primitive, counts,
+                     tuple(a.text for a in c.attempts))
+    plan = Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.FAILED, (), _stats(engine, c, clock), reason,
+                detail)
     return SolveResult(SolveStatus.FAILED, plan, reason)
+
+
+def _give_up(scenario: Scenario, engine: str, after: str, c: _Counters, clock: _Clock) -> SolveResult:
+    """Failed after the search ran out: the failure is the attempt that got furthest (a
+    pose path refused in the bottom tier or by the judge before a stream dead end; the
+    deepest planned step; the latest of equals), its headline followed by ``after``."""
+    def rank(item: tuple[int, _Attempt]) -> tuple[int, int, int]:
+        i, a = item
+        return (a.tier in (FailureTier.BOTTOM, FailureTier.JUDGE), -1 if a.step is None else a.step, i)
+
+    if not c.attempts:  # not expected: every iteration that goes on has recorded why
+        c.attempts.append(_Attempt("the search ran out", FailureTier.SYMBOLIC, FailureCause.NO_SYMBOLIC_PLAN,
+                                   what="no plan"))
+    geometric = [(i, a) for i, a in enumerate(c.attempts) if a.tier is not FailureTier.SYMBOLIC]
+    best = max(geometric or list(enumerate(c.attempts)), key=rank)[1]
+    return _failed(scenario, engine, best, c, clock, headline=f"{best.headline}{after}")
 
 
 def _annotate(plan: Plan, scenario: Scenario) -> Plan:
@@ -171,15 +257,18 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     except TimeBudgetExceeded as exc:
         if c.top_iterations == 0:
             clock.setup = budget.clock() - clock.start
+        headline = f"timeout: the {options.timeout:g} s budget ran out in {exc.where}"
+        text = f"{headline}; {c.top_iterations} top-tier iteration(s), {c.pose_paths} pose path(s) tried"
         return _failed(scenario, options.engine or scenario.settings.engine,
-                       f"timeout: the {options.timeout:g} s budget ran out in {exc.where}; "
-                       f"{c.top_iterations} top-tier iteration(s), {c.pose_paths} pose path(s) tried", c, clock)
+                       _Attempt(text, FailureTier.TIMEOUT, FailureCause.TIMEOUT,
+                                what=text if len(text) <= HEADLINE_MAX else headline), c, clock)
 
 
 def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], None] | None,
            c: _Counters, clock: _Clock, deadline: float | None) -> SolveResult:
     """:func:`solve` within a deadline (a :data:`ldhp_tamp.budget.clock` value or ``None``);
     raises :class:`TimeBudgetExceeded` when it passes."""
+    budget.check(deadline, "loading (the scenario and the planner, before the solve)")  # --timeout counts from main()
     settings = scenario.settings
     engine = options.engine or settings.engine
     h_max = options.max_top_iterations or settings.max_top_iterations
@@ -197,15 +286,18 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     if settings.friction_margin > 0:
         world = replace(world, friction=world.friction.scaled(1.0 - settings.friction_margin))
     if scenario.start_grasp_any:
-        return _failed(scenario, engine, "bottom tier: start_grasp = \"any\" (a held start whose grasp the "
-                       "planner chooses) is not supported by this planner yet; give the start grasp as "
-                       "{ gripper = [x, y, phi], width = w }", c, clock)
+        what = "setup: start_grasp = \"any\" (a held start whose grasp the planner chooses) is not supported yet"
+        return _failed(scenario, engine, _Attempt(
+            f"{what}; give the start grasp as {{ gripper = [x, y, phi], width = w }}", FailureTier.SETUP,
+            FailureCause.UNSUPPORTED_INPUT, what=what), c, clock)
 
     try:
         ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples,
                             deadline=deadline)
     except ContactPoseError as exc:
-        return _failed(scenario, engine, f"top tier, step 1: {exc}", c, clock)
+        text = f"top tier, step 1: {exc}"
+        return _failed(scenario, engine, _Attempt(text, FailureTier.SETUP, FailureCause.NO_CONTACT_POSE,
+                                                  what=_short(text)), c, clock)
     c.contact_state_nodes = len(ctx.states)
     budget.check(deadline, "the setup (contact states)")
     grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples))
@@ -225,7 +317,6 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     judge = _Judge(scenario, engine, options.simulate, c, clock)
     try:  # the helper process ends with the solve, however it ends
         forbidden: set[Transition | Sequel] = set()
-        failures: list[str] = []
         for iteration in range(1, h_max + 1):
             c.top_iterations = iteration
             budget.check(deadline, f"the top tier, before iteration {iteration}")
@@ -255,16 +346,21 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
             if sres.status is symbolic.SymbolicStatus.TIMEOUT and deadline is not None:
                 raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({sres.reason})")
             if not sres.solved:
-                why = f"symbolic tier ({engine}): {sres.reason}"
+                prefix, why, extra = f"symbolic tier ({engine}): ", f"symbolic tier ({engine}): {sres.reason}", ""
                 if sres.status is symbolic.SymbolicStatus.UNSOLVABLE and not any(
                         b == ctx.goal_state for pairs in allowed.values() for _, b in pairs):
-                    why += (f"; no admissible{' and unforbidden' if forbidden else ''} transition of a declared "
-                            f"MoveObject primitive enters {ctx.goal_state.name}")
-                if failures:  # the cause is what failed geometrically; the symbolic tier ran out of plans
+                    extra = (f"; no admissible{' and unforbidden' if forbidden else ''} transition of a declared "
+                             f"MoveObject primitive enters {ctx.goal_state.name}")
+                    why += extra
+                last = _Attempt(why, FailureTier.SYMBOLIC, FailureCause.NO_SYMBOLIC_PLAN,
+                                what=prefix + _short(sres.reason, HEADLINE_MAX - len(prefix) - len(extra)) + extra)
+                if c.attempts:  # the cause is what failed geometrically; the symbolic tier ran out of plans
                     names = sorted(f.label for f in forbidden)
                     shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
-                    why = "; ".join(failures[-5:]) + f"; after forbidding {shown}, the {why}"
-                return _failed(scenario, engine, why, c, clock)
+                    c.attempts.append(replace(last, text=f"iteration {iteration}: after forbidding {shown}, the {why}"))
+                    return _give_up(scenario, engine, f"; no contact-state plan left after {iteration} top-tier "
+                                    + ("iteration" if iteration == 1 else "iterations"), c, clock)
+                return _failed(scenario, engine, last, c, clock)
             planned = [a.transition for a in sres.actions if a.transition is not None]
             say(f"iteration {iteration}: " + (" -> ".join(str(a) for a in sres.actions) or "(the empty plan)"))
 
@@ -297,7 +393,10 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                                           _stats(engine, c, clock)), scenario)
                     say(f"solved in {clock.as_dict()['total']:.2f} s")
                     return SolveResult(SolveStatus.SOLVED, plan)
-                failures.append(outcome.reason)
+                c.attempts.append(replace(
+                    outcome.attempt or _Attempt(outcome.reason, FailureTier.BOTTOM, FailureCause.NO_GRASP_PATH,
+                                                what=_short(outcome.reason)),
+                    text=f"iteration {iteration}, pose path {tried}: {outcome.reason}"))
                 seg = outcome.segment
                 failed_step = seg.step if seg is not None and 0 <= seg.step < len(planned) else None
                 log.info("iteration %d, pose path %d (%s) failed at step %s: %s", iteration, tried,
@@ -310,7 +409,14 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                      dict(stream_stats.dead_steps), sum(stream_stats.alignment_failures.values()))
             # ---- feedback: forbid what failed, re-plan ------------------------------------
             if stream_stats.dead_ends:
-                failures.append("no stream sample for " + ", ".join(t.label for t in stream_stats.dead_ends))
+                dead = max(stream_stats.dead_steps, default=None)
+                at = None if dead is None or not 0 <= dead < len(planned) else planned[dead]
+                c.attempts.append(_Attempt(
+                    f"iteration {iteration}: no stream sample for "
+                    + ", ".join(t.label for t in stream_stats.dead_ends), FailureTier.STREAMS,
+                    FailureCause.NO_STREAM_SAMPLE, where="streams" + ("" if at is None else f", step {dead} ({at.label})"),
+                    what="no object pose path gets through it", step=dead if at is not None else None,
+                    primitive=None if at is None else at.action))
             # The deepest step the bottom tier failed at (the paths that failed earlier were
             # varied there and got past it); when no path reached it, the deepest dead end of
             # the streams. Dead ends found after a bottom-tier failure, while the search tried
@@ -319,20 +425,28 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
             if deepest is None and planned and tried == 0:
                 # the streams ran out of work before any dead end: blame their frontier
                 deepest = min(max(stream_stats.deepest, 0), len(planned) - 1)
+                c.attempts.append(_Attempt(
+                    f"iteration {iteration}: the streams' work budget ran out before step {deepest} "
+                    f"({planned[deepest].label}) had a pose path", FailureTier.STREAMS, FailureCause.NO_STREAM_SAMPLE,
+                    where=f"streams, step {deepest} ({planned[deepest].label})",
+                    what="the streams' work budget ran out", step=deepest, primitive=planned[deepest].action))
             if deepest is None and tried == 0:
                 within = ", ".join(sorted(s.name for s in stream_stats.alignment_failures)) or ctx.goal_state.name
-                return _failed(scenario, engine, "top tier, step 3: the contact-state plan needs no change of "
-                               f"contact state (start and goal are both in {ctx.goal_state.name}), but no in-state "
-                               "motion (a push, a tip then a push, or a biplanar slide) takes the object from the "
-                               f"start pose to the goal pose without leaving {within}", c, clock)
+                text = ("top tier, step 3: the contact-state plan needs no change of contact state (start and "
+                        f"goal are both in {ctx.goal_state.name}), but no in-state motion (a push, a tip then a "
+                        "push, or a biplanar slide) takes the object from the start pose to the goal pose "
+                        f"without leaving {within}")
+                return _failed(scenario, engine, _Attempt(
+                    text, FailureTier.STREAMS, FailureCause.NO_STREAM_SAMPLE,
+                    what=_short("top tier, step 3: the contact-state plan needs no change of contact state, but "
+                                f"no in-state motion reaches the goal without leaving {within}")), c, clock)
             if deepest is None:
-                return _failed(scenario, engine, "top tier: the contact-state plan needs no object motion "
-                               "but the bottom tier found no grasp sequence: " + "; ".join(failures[-3:]), c, clock)
+                return _give_up(scenario, engine, " (the contact-state plan needs no object motion)", c, clock)
             culprits = _culprits(planned, deepest, forbidden)
             forbidden.update(culprits)
+            c.forbidden = len(forbidden)
             say(f"iteration {iteration} failed; forbidding " + ", ".join(q.label for q in culprits))
-        return _failed(scenario, engine, f"no feasible plan after {h_max} top-tier iterations (H_max): "
-                       + "; ".join(failures[-5:]), c, clock)
+        return _give_up(scenario, engine, f" after {h_max} top-tier iterations (H_max)", c, clock)
     finally:
         # cleanup: the outcome is decided, an alarm landing here must not replace it
         with contextlib.suppress(TimeBudgetExceeded):
@@ -385,6 +499,8 @@ class Verdict:
 
     step: int | None = None
     reason: str = ""
+    cause: FailureCause | None = None  # plan-invalid, ambiguous-motion or diverges-in-simulation
+    summary: str = ""  # the reason in a few words, for a headline ("breaks rule 8")
 
     @property
     def ok(self) -> bool:
@@ -408,11 +524,13 @@ class _Judge:
         if not report.valid:
             first = min((v for v in report.violations if v.step is not None), key=lambda v: v.step or 0,
                         default=report.violations[0])
-            return self._refuse(steps, first.step or 0, f"breaks rule {first.rule}: {first.message}")
+            return self._refuse(steps, first.step or 0, f"breaks rule {first.rule}: {first.message}",
+                                FailureCause.PLAN_INVALID, f"breaks rule {first.rule}")
         forward = forward_check(plan, self.scenario)
         if not forward.ok:
             assert forward.step is not None
-            return self._refuse(steps, forward.step, f"is ambiguous at {forward.reason}")
+            return self._refuse(steps, forward.step, f"is ambiguous at {forward.reason}",
+                                FailureCause.AMBIGUOUS_MOTION, "is ambiguous (forward problem)")
         if not self.simulate:
             return Verdict()
         from ldhp_tamp.simulate import simulate_plan  # MuJoCo loads only when asked for
@@ -423,13 +541,16 @@ class _Judge:
         if sim.executes:
             return Verdict()
         step = sim.diverged_step if sim.diverged_step is not None else len(steps) - 1
-        return self._refuse(steps, step, f"diverges in the physics simulation: {sim.reason}")
+        return self._refuse(steps, step, f"diverges in the physics simulation: {sim.reason}",
+                            FailureCause.DIVERGES_IN_SIMULATION, "diverges in the physics simulation")
 
-    def _refuse(self, steps: tuple[Step, ...], step: int, why: str) -> Verdict:
+    def _refuse(self, steps: tuple[Step, ...], step: int, why: str, cause: FailureCause | None = None,
+                summary: str = "") -> Verdict:
         self.c.judge_rejections += 1
         reason = f"the commanded motion of step {step} ({steps[step].primitive}) {why}"
         log.info("the judge refuses the bottom tier's plan: %s", reason)
-        return Verdict(step, reason)
+        return Verdict(step, reason, cause, f"the motion of plan step {step} ({steps[step].primitive}) "
+                                            + (summary or why))
 
 
 def _segment_of_step(steps: Sequence[Step], step: int) -> tuple[int, bool]:
@@ -451,6 +572,7 @@ class _BottomOutcome:
     steps: tuple[Step, ...] | None = None
     segment: Segment | None = None
     reason: str = ""
+    attempt: _Attempt | None = None  # the failure in structure (``reason`` is its text)
 
 
 def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters,
@@ -465,8 +587,10 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
     the retries are spent) fails the path at that segment."""
     segments = list(path.segments)
     if not segments:  # nothing for a grasp to be carried along
-        return _BottomOutcome(reason="bottom tier: the object need not move (its start pose is the goal "
-                                     "pose), and plans of AdjustGrasp steps alone are not searched")
+        why = ("bottom tier: the object need not move (its start pose is the goal pose), and plans of "
+               "AdjustGrasp steps alone are not searched")
+        return _BottomOutcome(reason=why, attempt=_Attempt(why, FailureTier.BOTTOM, FailureCause.NO_GRASP_PATH,
+                                                           what=why))
     refinements = 0
     rejected = 0
     while True:
@@ -489,7 +613,12 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
                 rejected += 1
                 log.info("grasp %d no longer carries segment %d; planning the path again", res.grasps[k], k)
                 continue
-            return _BottomOutcome(segment=segments[k], reason=f"bottom tier: {verdict.reason}")
+            why = f"bottom tier: {verdict.reason}"
+            return _BottomOutcome(segment=segments[k], reason=why, attempt=_Attempt(
+                why, FailureTier.JUDGE, verdict.cause or FailureCause.PLAN_INVALID, where=_where("judge", segments[k], k),
+                what=verdict.summary or _short(verdict.reason, HEADLINE_MAX // 2),
+                step=segments[k].step if segments[k].step >= 0 else None, segment=k,
+                primitive=steps[verdict.step].primitive))
         k = res.failing_segment
         k = k if k is not None and 0 <= k < len(segments) else len(segments) - 1
         seg = segments[k]
@@ -503,4 +632,27 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         why = res.reason if res.reason.startswith("bottom tier") else f"bottom tier: {res.reason}"
         if refinements:
             why += f" (after {refinements} dichotomy refinement(s))"
-        return _BottomOutcome(segment=seg, reason=why)
+        return _BottomOutcome(segment=seg, reason=why, attempt=_grasp_failure(res, seg, k, why))
+
+
+_CANDIDATES = re.compile(r"none of the (\d+) grasps")
+
+
+def _grasp_failure(res: GraspPlanResult, seg: Segment, k: int, text: str) -> _Attempt:
+    """The grasp graph's failure at segment ``k`` in structure: an empty G_m, forward
+    reachability dying, or no grasp sequence to the goal."""
+    candidates = None
+    if res.status is GraspPlanStatus.NO_GRASP_FOR_SEGMENT:
+        found = _CANDIDATES.search(res.reason)  # the grasps collision-free at both ends, all tried
+        candidates = int(found.group(1)) if found else (res.layer_sizes[k] if k < len(res.layer_sizes) else None)
+        cause = FailureCause.EMPTY_MOTION_SET
+        what = "no grasp executes it" + ("" if candidates is None else f" ({candidates} candidates)")
+    elif "forward reachability dies" in res.reason:
+        cause, what = FailureCause.UNREACHABLE, "no grasp sequence from the start reaches a grasp that executes it"
+    elif "cannot release" in res.reason:
+        cause, what = FailureCause.NO_GRASP_PATH, "the gripper cannot release the object at the goal"
+    else:
+        cause, what = FailureCause.NO_GRASP_PATH, "no grasp sequence reaches the goal"
+    return _Attempt(text, FailureTier.BOTTOM, cause, where=_where("bottom tier", seg, k), what=what,
+                    step=seg.step if seg.step >= 0 else None, segment=k, primitive=seg.primitive,
+                    candidates=candidates)

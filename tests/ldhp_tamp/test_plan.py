@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -13,7 +14,11 @@ import pytest
 from geometry.poses import Pose
 from ldhp_tamp.errors import InputError, PlanFormatError
 from ldhp_tamp.plan import (
+    MAX_ATTEMPTS,
     PLAN_FORMAT,
+    Failure,
+    FailureCause,
+    FailureTier,
     Family,
     Plan,
     PlanStats,
@@ -292,3 +297,80 @@ def test_model_coerces_and_checks() -> None:
         Waypoint(Pose(0, 0, 0), Pose(0, 0, 0), 1.0, (None, None), ((1.0, 2.0, 3.0), None))
     with pytest.raises(TypeError):
         step.parameters["k"] = 1  # read-only
+
+
+# --------------------------------------------------------------------------- failure
+
+
+def _failed_plan(**failure: object) -> Plan:
+    detail = Failure(**{"tier": FailureTier.BOTTOM, "cause": FailureCause.EMPTY_MOTION_SET, "step": 3,
+                        "segment": 5, "primitive": "biplanar-slide",
+                        "counts": {"top_iterations": 10, "pose_paths": 25, "candidates": 1039},
+                        "attempts": ("iteration 1, pose path 1: bottom tier: no grasp can execute segment 5 "
+                                     '(a "quoted" name; ünïcode)', "iteration 2: no stream sample for tip l1-e1->v2-e1"),
+                        **failure})  # type: ignore[arg-type]
+    return Plan(PLAN_FORMAT, "failed", "ab" * 32, PlanStatus.FAILED, (), PlanStats("pyperplan"),
+                "bottom tier, step 3, segment 5 (biplanar-slide a -> b): no grasp executes it", detail)
+
+
+def test_the_failure_of_a_failed_plan_round_trips(tmp_path: Path) -> None:
+    plan = _failed_plan()
+    back = read_plan(write_plan(plan, tmp_path / "failed.json"))
+    assert back == plan and back.failure is not None
+    assert back.failure.cause is FailureCause.EMPTY_MOTION_SET and back.failure.tier is FailureTier.BOTTOM
+    assert back.failure.counts == {"top_iterations": 10, "pose_paths": 25, "candidates": 1039}
+    assert back.failure.attempts == plan.failure.attempts  # type: ignore[union-attr]
+    data = json.loads((tmp_path / "failed.json").read_text())
+    assert list(data)[-1] == "failure" and data["failure"]["cause"] == "empty-motion-set"
+    assert data["failure"]["step"] == 3 and data["failure"]["primitive"] == "biplanar-slide"
+    # nulls where there is no step, segment or primitive
+    bare = _failed_plan(tier="setup", cause="no-contact-pose", step=None, segment=None, primitive=None,
+                        counts={}, attempts=())
+    text = plan_to_json(bare)
+    assert json.loads(text)["failure"] == {"tier": "setup", "cause": "no-contact-pose", "step": None,
+                                           "segment": None, "primitive": None, "counts": {}, "attempts": []}
+    assert read_plan_string(text) == bare
+
+
+def test_the_failure_keeps_one_attempt_per_line_and_the_last_ones() -> None:
+    plan = _failed_plan(attempts=tuple(f"attempt {i}" for i in range(MAX_ATTEMPTS + 5)))
+    assert plan.failure is not None and plan.failure.attempts[0] == "attempt 5"
+    assert len(plan.failure.attempts) == MAX_ATTEMPTS
+    lines = plan_to_json(plan).splitlines()
+    assert '      "attempt 5",' in lines and '      "attempt 24"' in lines
+
+
+def test_plans_without_a_failure_still_read(example: Plan) -> None:
+    # the spec's examples, a solved plan, older failed plans: no failure key
+    assert example.failure is None and '"failure"' not in plan_to_json(example)
+    old = json.dumps({"format": PLAN_FORMAT, "scenario": "s", "scenario_sha256": "x", "status": "failed",
+                      "reason": "no feasible plan after 10 top-tier iterations (H_max): ...", "steps": [],
+                      "stats": {}})
+    plan = read_plan_string(old)
+    assert plan.status is PlanStatus.FAILED and plan.failure is None and plan.reason.startswith("no feasible")
+    assert read_plan_string(old.replace('"stats": {}', '"stats": {}, "failure": null')).failure is None
+
+
+@pytest.mark.parametrize("edit, fragment", [
+    (lambda f: f.update(cause="gremlins"), "failure.cause: expected one of no-contact-pose, "),
+    (lambda f: f.update(tier="middle"), "failure.tier: expected one of setup, symbolic,"),
+    (lambda f: f.pop("cause"), "failure: missing key 'cause'"),
+    (lambda f: f.update(step=-1), "failure.step: expected a non-negative integer"),
+    (lambda f: f.update(primitive=3), "failure.primitive: expected a string"),
+    (lambda f: f.update(counts={"top_iterations": 1.5}), "failure.counts.top_iterations: expected a non-negative"),
+    (lambda f: f.update(attempts="one"), "failure.attempts: expected a list"),
+    (lambda f: f.update(attempts=["a", 2]), "failure.attempts[1]: expected a string"),
+])
+def test_a_malformed_failure_is_refused(edit, fragment: str) -> None:
+    data = json.loads(plan_to_json(_failed_plan()))
+    edit(data["failure"])
+    with pytest.raises(PlanFormatError, match=re.escape(fragment)):
+        read_plan_string(json.dumps(data), "failed.json")
+
+
+def test_the_cause_list_is_closed_and_documented() -> None:
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "formats" / "plan.md").read_text()
+    for cause in FailureCause:
+        assert f"`{cause.value}`" in doc, cause
+    for tier in FailureTier:
+        assert f"`{tier.value}`" in doc, tier

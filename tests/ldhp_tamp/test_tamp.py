@@ -9,7 +9,7 @@ import pytest
 
 from ldhp_tamp.cli import main
 from ldhp_tamp.executability import forward_check
-from ldhp_tamp.plan import PlanStatus, read_plan
+from ldhp_tamp.plan import FailureCause, FailureTier, PlanStatus, read_plan
 from ldhp_tamp.resources import scenarios_dir
 from ldhp_tamp.scenario import load_scenario, load_scenario_string
 from ldhp_tamp.tamp import SolveOptions, SolveStatus, solve
@@ -30,6 +30,7 @@ def test_pick_example_is_solved_with_a_valid_plan(pick_result) -> None:
     families = [s.family.value for s in plan.steps]
     assert families[0] == "adjust-grasp" and families[-1] == "move-object"
     assert plan.steps[-1].primitive == "air-move"
+    assert plan.reason is None and plan.failure is None  # a solved plan has no failure
     stats = plan.stats
     assert stats.contact_state_nodes > 0 and stats.grasp_graph_nodes > 0 and stats.top_iterations == 1
     assert stats.time_s["total"] >= stats.time_s["grasp_graph"] > 0
@@ -65,6 +66,15 @@ def test_task1_at_60_degrees_fails_honestly() -> None:
     result = solve(sc)
     assert result.status is SolveStatus.FAILED and result.plan.steps == ()
     assert "ambiguous" in result.reason or "no grasp" in result.reason
+    # a headline: the tier, the step, the segment and its primitive; the rest in the failure
+    assert len(result.reason) <= 200 and result.reason.startswith(("bottom tier, step ", "judge, step "))
+    failure = result.plan.failure
+    assert failure is not None and failure.tier in (FailureTier.BOTTOM, FailureTier.JUDGE)
+    assert failure.step is not None and failure.segment is not None and failure.primitive
+    assert f"step {failure.step}, segment {failure.segment} ({failure.primitive} " in result.reason
+    assert failure.counts["top_iterations"] == result.plan.stats.top_iterations
+    assert failure.counts["attempts"] >= len(failure.attempts) > 1
+    assert all(a.startswith("iteration ") for a in failure.attempts)
 
 
 def test_an_impossible_task_fails_with_a_reason_naming_the_tier() -> None:
@@ -76,6 +86,9 @@ def test_an_impossible_task_fails_with_a_reason_naming_the_tier() -> None:
     assert result.status is SolveStatus.FAILED
     assert result.plan.status is PlanStatus.FAILED and result.plan.steps == ()
     assert result.reason.startswith("top tier, step 1") and "touches nothing" in result.reason
+    failure = result.plan.failure
+    assert failure is not None and (failure.tier, failure.cause) == (FailureTier.SETUP, FailureCause.NO_CONTACT_POSE)
+    assert failure.attempts == (result.reason,)  # short enough to be its own headline
 
 
 def test_cli_solve_writes_a_valid_plan_and_emits_pddl(tmp_path: Path, capsys) -> None:
@@ -230,3 +243,61 @@ def test_a_plan_that_diverges_in_simulation_is_fed_back(monkeypatch: pytest.Monk
     assert result.status is SolveStatus.SOLVED
     assert len(seen) == 2 and seen[0] != seen[1]  # another grasp carries the lift
     assert result.plan.stats.extra["judge_rejections"] == 1
+
+
+# --------------------------------------------------------------------------- failures
+
+
+def test_a_long_reason_is_cut_to_its_first_clause() -> None:
+    from ldhp_tamp.tamp import _short
+
+    assert _short("short enough (kept whole); yes") == "short enough (kept whole); yes"
+    long = "no contact-state path (" + "x" * 300 + ") from a to b; and more " + "y" * 200
+    assert _short(long) == "no contact-state path from a to b"
+    assert _short("word " * 100, 50).endswith("...") and len(_short("word " * 100, 50)) <= 50
+
+
+def test_giving_up_names_the_attempt_that_got_furthest() -> None:
+    from ldhp_tamp.tamp import _Attempt, _Clock, _Counters, _give_up
+
+    c = _Counters(top_iterations=3)
+    c.attempts += [
+        _Attempt("it 1", FailureTier.BOTTOM, FailureCause.EMPTY_MOTION_SET, "bottom tier, step 2, segment 4 (tip a -> b)",
+                 "no grasp executes it (9 candidates)", 2, 4, "tip", 9),
+        _Attempt("it 2", FailureTier.STREAMS, FailureCause.NO_STREAM_SAMPLE, "streams, step 5 (push b->c)",
+                 "no object pose path gets through it", 5, None, "push"),
+        _Attempt("it 3", FailureTier.JUDGE, FailureCause.AMBIGUOUS_MOTION, "judge, step 3, segment 6 (tip b -> c)",
+                 "the motion of plan step 8 (slide) is ambiguous (forward problem)", 3, 6, "slide"),
+        _Attempt("it 4", FailureTier.BOTTOM, FailureCause.UNREACHABLE, "bottom tier, step 1, segment 1 (push a -> a)",
+                 "no grasp sequence from the start reaches a grasp that executes it", 1, 1, "push"),
+    ]
+    sc = load_scenario(PICK)
+    result = _give_up(sc, "pyperplan", " after 3 top-tier iterations (H_max)", c, _Clock())
+    assert result.reason == ("judge, step 3, segment 6 (tip b -> c): the motion of plan step 8 (slide) is "
+                             "ambiguous (forward problem) after 3 top-tier iterations (H_max)")
+    f = result.plan.failure
+    assert f is not None and (f.tier, f.cause, f.step, f.segment, f.primitive) == \
+        (FailureTier.JUDGE, FailureCause.AMBIGUOUS_MOTION, 3, 6, "slide")
+    assert f.attempts == ("it 1", "it 2", "it 3", "it 4") and f.counts["top_iterations"] == 3
+    assert "candidates" not in f.counts
+
+
+def test_a_plan_the_simulation_always_refuses_fails_in_the_judge(monkeypatch: pytest.MonkeyPatch) -> None:
+    from types import SimpleNamespace
+
+    import ldhp_tamp.simulate as sim
+
+    def fake(plan, scenario, options=None):
+        step = next(i for i, s in enumerate(plan.steps) if s.family.value == "move-object")
+        return SimpleNamespace(executes=False, diverged_step=step, reason="a test's divergence")
+
+    monkeypatch.setattr(sim, "simulate_plan", fake)
+    result = solve(load_scenario(PICK), SolveOptions(simulate=True, max_top_iterations=1, judge_retries=0,
+                                                     pose_paths_per_plan=1))
+    assert result.status is SolveStatus.FAILED
+    assert result.reason.startswith("judge, step 0, segment 0 (air-move ") and len(result.reason) <= 200
+    assert "diverges in the physics simulation" in result.reason
+    f = result.plan.failure
+    assert f is not None and (f.tier, f.cause) == (FailureTier.JUDGE, FailureCause.DIVERGES_IN_SIMULATION)
+    assert f.primitive == "air-move" and f.counts["judge_rejections"] >= 1
+    assert any("a test's divergence" in a for a in f.attempts)
