@@ -12,7 +12,7 @@ ablation. Data flows through plain functions over small values::
     path = write_domain_without("ldhp", {"tip"}, tmp)    # the same, as a checked file
     table = ablate(["scenarios/example_pick.toml"], AblationOptions(jobs=2))
     print(format_table(table))                           # Table III, Markdown
-    write_csv(table, "ablation.csv")                     # removed,scenario,feasible
+    write_csv(table, "ablation.csv")                     # removed,scenario,feasible,reason,time_s
 
 A cell is feasible (``Y``) when the solve returns a plan that the validator accepts and
 that uses only the actions of the ablated domain; anything else (no plan, a time limit,
@@ -67,8 +67,9 @@ log = logging.getLogger(__name__)
 #: The ``removed`` label of the baseline row: the domain with nothing removed.
 BASELINE = "none"
 
-#: The columns of the CSV, in order.
-CSV_COLUMNS: tuple[str, ...] = ("removed", "scenario", "feasible")
+#: The columns of the CSV, in order: the table's three first, then why a cell is not
+#: feasible (the solve's one-line reason; empty when feasible) and the solve's wall time.
+CSV_COLUMNS: tuple[str, ...] = ("removed", "scenario", "feasible", "reason", "time_s")
 
 #: An s-expression: an atom, or a list of s-expressions.
 SExpr = str | list["SExpr"]
@@ -651,14 +652,17 @@ def format_table(table: AblationTable) -> str:
 
 
 def format_csv(table: AblationTable) -> str:
-    """The table as CSV with exactly the columns ``removed,scenario,feasible``
-    (``feasible`` is ``Y`` or ``N``; the baseline's ``removed`` is :data:`BASELINE`)."""
+    """The table as CSV with the columns :data:`CSV_COLUMNS`,
+    ``removed,scenario,feasible,reason,time_s`` (``feasible`` is ``Y`` or ``N``; the
+    baseline's ``removed`` is :data:`BASELINE`; ``reason`` is empty for a feasible cell
+    and on one line; ``time_s`` the solve's wall time in seconds, 3 decimals)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(CSV_COLUMNS)
     for row in table.rows:
         for cell in row.cells:
-            writer.writerow([row.removed, cell.scenario, cell.mark])
+            reason = "" if cell.feasible else " ".join(cell.reason.split())
+            writer.writerow([row.removed, cell.scenario, cell.mark, reason, f"{cell.time_s:.3f}"])
     return buf.getvalue()
 
 
