@@ -888,7 +888,7 @@ def _run_engine_in_child(problem: SymbolicProblem, engine: str, timeout_s: float
     """:func:`_run_engine` in a forked child that sends its :class:`_Answer` back through a
     pipe; killed, with the engine's own subprocesses (they share its process group), when
     ``timeout_s`` passes. A bare :func:`os.fork` rather than :mod:`multiprocessing`: the
-    overhead per call is about 20 ms instead of 60 (see ``tests/ldhp_tamp/test_budget.py``)."""
+    overhead per call is about 20 ms instead of 60 (measured by ``benchmarks/startup.py``)."""
     if timeout_s <= 0:
         return _Answer("TIMEOUT", None, "no time left")
     deadline = budget.clock() + timeout_s  # the solve's clock, which a test may replace

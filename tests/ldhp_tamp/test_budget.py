@@ -432,7 +432,7 @@ def test_cli_timeout_counts_from_the_start_of_the_command(fake_clock: FakeClock,
     out = tmp_path / "plan.json"
     assert main(["solve", str(PICK), "--out", str(out), "--timeout", "1", "-q"]) == EXIT_NO_PLAN
     data = json.loads(out.read_text())
-    assert data["reason"].startswith("timeout: the 1 s budget ran out in ")
+    assert data["reason"].startswith("timeout: the 1 s budget ran out in loading (the scenario and the planner")
     assert data["stats"]["time_s"]["total"] == 2.0 and data["stats"]["top_iterations"] == 0
 
 
