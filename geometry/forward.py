@@ -48,9 +48,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry import mechanics
 from geometry.errors import GeometryError
-from geometry.poses import BoolArray, FloatArray
+from geometry.poses import BoolArray, FloatArray, wrap_angle
 
-__all__ = ["MAX_CONTACTS", "ForwardCheck", "alternative_motions"]
+__all__ = ["MAX_CONTACTS", "ForwardCheck", "alternative_motions", "screw_velocity"]
 
 #: Contacts per waypoint the enumeration takes (3^6 = 729 assignments).
 MAX_CONTACTS = 6
@@ -80,6 +80,27 @@ class ForwardCheck:
     ambiguous: BoolArray
     twist: FloatArray
     modes: NDArray[np.int8]
+
+
+def screw_velocity(pose0: FloatArray, pose1: FloatArray, points: FloatArray) -> FloatArray:
+    """Velocities (B, P, 2) of material points at ``points`` (world, at ``pose0``) under
+    the displacement ``pose0 -> pose1`` (B, 3) taken as the screw it is: a turn ``d``
+    about its fixed point ``c`` gives ``d J (p - c)`` (a point on the turn's centre does
+    not move, as a round finger's centre in a pivot), a pure translation its shift."""
+    d = wrap_angle(pose1[:, 2] - pose0[:, 2])
+    ca, sa = np.cos(d), np.sin(d)
+    # p' = R(d) (p - o0) + o1: the fixed point solves (I - R) c = o1 - R o0
+    ro0 = np.stack([ca * pose0[:, 0] - sa * pose0[:, 1], sa * pose0[:, 0] + ca * pose0[:, 1]], axis=-1)
+    t = pose1[:, :2] - ro0
+    det = (1.0 - ca) ** 2 + sa ** 2
+    turning = np.abs(d) > 1e-12
+    safe = np.where(turning, det, 1.0)
+    cx = ((1.0 - ca) * t[:, 0] - sa * t[:, 1]) / safe
+    cy = (sa * t[:, 0] + (1.0 - ca) * t[:, 1]) / safe
+    rel = points - np.stack([cx, cy], axis=-1)[:, None, :]
+    screw = d[:, None, None] * np.stack([-rel[..., 1], rel[..., 0]], axis=-1)
+    shift = np.broadcast_to((pose1[:, :2] - pose0[:, :2])[:, None, :], screw.shape)
+    return np.where(turning[:, None, None], screw, shift)
 
 
 def _rows(points: FloatArray, normals: FloatArray, com: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import sys
 import traceback
 from typing import TYPE_CHECKING, Callable, Sequence
@@ -482,6 +483,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # stdout closed early (`| head`): not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
     except Exception as exc:  # a bug: never let it pass for "no plan" (1) or "bad input" (2)
         traceback.print_exc()
         print(f"ldhp-tamp: internal error (a bug): {type(exc).__name__}: {exc}", file=sys.stderr)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geometry import collision, mechanics
-from geometry.forward import MAX_CONTACTS, alternative_motions
+from geometry.forward import MAX_CONTACTS, alternative_motions, screw_velocity
 from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
 from geometry.shapes import FloatArray
 from geometry.tolerances import PENETRATION_TOL
@@ -77,27 +77,6 @@ def _describe(labels: tuple[str, ...], modes: np.ndarray, twist: FloatArray) -> 
     turn = np.degrees(twist[2])
     return (f"the same finger motion also lets the object move by ({twist[0]:.2f}, {twist[1]:.2f}) mm and "
             f"{turn:.2f} deg ({', '.join(what) or 'every contact lets go'}), a motion that balances too")
-
-
-def _velocity(pose0: FloatArray, pose1: FloatArray, points: FloatArray) -> FloatArray:
-    """Velocities (B, P, 2) of material points at ``points`` (world, at ``pose0``) under
-    the displacement ``pose0 -> pose1`` (B, 3) taken as the screw it is: a turn ``d``
-    about its fixed point ``c`` gives ``d J (p - c)`` (a point on the turn's centre does
-    not move, as a round finger's centre in a pivot), a pure translation its shift."""
-    d = wrap_angle(pose1[:, 2] - pose0[:, 2])
-    ca, sa = np.cos(d), np.sin(d)
-    # p' = R(d) (p - o0) + o1: the fixed point solves (I - R) c = o1 - R o0
-    ro0 = np.stack([ca * pose0[:, 0] - sa * pose0[:, 1], sa * pose0[:, 0] + ca * pose0[:, 1]], axis=-1)
-    t = pose1[:, :2] - ro0
-    det = (1.0 - ca) ** 2 + sa ** 2
-    turning = np.abs(d) > 1e-12
-    safe = np.where(turning, det, 1.0)
-    cx = ((1.0 - ca) * t[:, 0] - sa * t[:, 1]) / safe
-    cy = (sa * t[:, 0] + (1.0 - ca) * t[:, 1]) / safe
-    rel = points - np.stack([cx, cy], axis=-1)[:, None, :]
-    screw = d[:, None, None] * np.stack([-rel[..., 1], rel[..., 0]], axis=-1)
-    shift = np.broadcast_to((pose1[:, :2] - pose0[:, :2])[:, None, :], screw.shape)
-    return np.where(turning[:, None, None], screw, shift)
 
 
 #: How far ahead (finger travel, mm; and waypoints) the fingers must push into an object
@@ -177,9 +156,9 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
     # planned twist: the COM's displacement and the turn; the other bodies' displacements
     com0 = transform_points(flat.obj[rows], world.object.com)[:, 0]
     turn = wrap_angle(flat.obj[nxt, 2] - flat.obj[rows, 2])
-    planned = np.column_stack([_velocity(flat.obj[rows], flat.obj[nxt], com0[:, None, :])[:, 0], turn])
+    planned = np.column_stack([screw_velocity(flat.obj[rows], flat.obj[nxt], com0[:, None, :])[:, 0], turn])
     finger = c.finger >= 0
-    dg = _velocity(flat.grip[rows], flat.grip[nxt], c.points)  # (B, C, 2)
+    dg = screw_velocity(flat.grip[rows], flat.grip[nxt], c.points)  # (B, C, 2)
     shift = rotate_vectors(flat.grip[nxt], finger_offsets(flat.width[nxt] - flat.width[rows]))  # (B, 2, 2)
     other = np.where(finger[None, :, None], dg + shift[:, np.clip(c.finger, 0, 1), :], 0.0)
     L = world.object.length_scale

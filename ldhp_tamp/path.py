@@ -76,18 +76,24 @@ class Segment:
         """A contact-sensitive segment (``tip``, ``biplanar-slide``) with a sample to cut at."""
         return self.primitive in REFINABLE and self.parameter_values.size >= 3
 
-    def split(self) -> tuple["Segment", "Segment"]:
+    def split(self, at: int | None = None) -> tuple["Segment", "Segment"]:
         """Bisect the parameter range (paper: dichotomy refinement).
 
         The cut is the dense sample nearest the middle of the range (at most half a
-        waypoint step, 2 mm of vertex motion, from it), so the halves' samples are the
-        parent's own: its first ``i + 1`` and its last ``J - i + 1``.
+        waypoint step, 2 mm of vertex motion, from it), or sample ``at`` when given (an
+        interior sample), so the halves' samples are the parent's own: its first
+        ``i + 1`` and its last ``J - i + 1``.
         """
         values = self.parameter_values
         n = values.size
         if n < 3:
             raise ValueError(f"a {self.primitive} segment of {n} samples cannot be bisected")
-        i = int(np.clip(np.argmin(np.abs(values - 0.5 * (self.s0 + self.s1))), 1, n - 2))
+        if at is None:
+            i = int(np.clip(np.argmin(np.abs(values - 0.5 * (self.s0 + self.s1))), 1, n - 2))
+        elif 1 <= at <= n - 2:
+            i = int(at)
+        else:
+            raise ValueError(f"cut {at} is not an interior sample of a segment of {n} samples")
         mid = float(values[i])
         mid_state = contact_state(self.world, Pose.from_array(self.poses[i]))
         key = "angle" if self.motion.kind is not MotionKind.TRANSLATE else "travel"

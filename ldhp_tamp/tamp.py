@@ -27,7 +27,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from geometry import mechanics
+from geometry.contacts import contact_point_arrays
 from geometry.grasps import GraspOptions, enumerate_grasps
+from geometry.poses import transform_points
 from ldhp_tamp import budget, symbolic
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
@@ -564,6 +567,38 @@ def _segment_of_step(steps: Sequence[Step], step: int) -> tuple[int, bool]:
     return after[0], moves[after[0]] == step
 
 
+#: A pose where the object rests on the environment alone with every coefficient times
+#: this (a margin: a regrasp there must not depend on the last bit of friction).
+REST_FRICTION = 0.8
+
+
+def _rest_cut(seg: Segment) -> int | None:
+    """Where to cut a failing segment: the middle of its longest run of interior samples at
+    which the object rests on the environment alone (``REST_FRICTION`` of every
+    coefficient), so that the gripper can let go and regrasp there (``open``,
+    ``approach-contact``: windows a fraction of a degree wide are found from the statics
+    of the segment's own samples); ``None`` (the middle of the range) when there is none."""
+    world = seg.world
+    poses = np.asarray(seg.poses, dtype=float)
+    n = poses.shape[0]
+    if n < 3:
+        return None
+    pts, nrm, mu, live = contact_point_arrays(world, poses[1:-1])
+    if not live.any():
+        return None
+    com = transform_points(poses[1:-1], world.object.com)[:, 0]
+    modes = np.where(live, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT).astype(np.int8)
+    rests = mechanics.feasible_batch(mechanics.Contacts.make(pts, np.where(live[..., None], nrm, 0.0),
+                                                             np.where(live, mu * REST_FRICTION, 0.0), modes),
+                                     com, world.object.length_scale) & live.any(axis=1)
+    if not rests.any():
+        return None
+    edges = np.diff(np.concatenate([[0], rests.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    longest = int(np.argmax(ends - starts))
+    return 1 + (int(starts[longest]) + int(ends[longest]) - 1) // 2
+
+
 @dataclass(frozen=True)
 class _BottomOutcome:
     """The bottom tier's answer for one pose path: the plan steps, or the segment to
@@ -625,7 +660,7 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         # The paper's rule: a failing tip or biplanar slide is bisected (up to L_max
         # times); any other failure goes back to the top tier for another pose path.
         if seg.refinable and refinements < l_max:
-            segments[k:k + 1] = list(seg.split())
+            segments[k:k + 1] = list(seg.split(_rest_cut(seg)))
             refinements += 1
             c.refinements += 1
             continue

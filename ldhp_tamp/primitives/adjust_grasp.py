@@ -1282,29 +1282,73 @@ class ApproachContact(_AdjustGrasp):
 
 @REGISTRY.register("open", Family.ADJUST_GRASP)
 class Open(_AdjustGrasp):
-    """``open``: g -> {0, 0}, the reverse of ``approach-contact``.
+    """``open``: disengage contacts (paper, Table II: "change opening width to disengage").
 
-    Leave the contact (a two-finger grasp opens to the approach width, or moves straight
-    up at a fixed width; a one-finger grasp backs off along its contact normal), retreat
-    along the gripper's +y axis until clear of the object, rise to the safe height and
-    move to the home pose. Same checks as ``approach-contact`` (the object must rest without the
-    gripper); the two share one memo of route validity per pose.
+    Two kinds of edge:
+
+    - g -> {0, 0}, the reverse of ``approach-contact``: leave the contact (a two-finger
+      grasp opens to the approach width, or moves straight up at a fixed width; a
+      one-finger grasp backs off along its contact normal), retreat along the gripper's +y
+      axis until clear of the object, rise to the safe height and move to the home pose.
+      Same checks as ``approach-contact`` (the object must rest without the gripper); the
+      two share one memo of route validity per pose.
+    - both fingers touching -> finger k alone, the reverse of ``close``: finger k stays
+      put (FIXED on its contact), the other opens to the destination's larger width, the
+      gripper origin following at half the rate (the arm keeps finger k where it is). The
+      object must stay still under finger k and the environment at every sample. Not for
+      a fixed-width gripper.
     """
 
     name = "open"
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
-        src = src[src != NO_CONTACT] if members[NO_CONTACT] else np.zeros(0, np.int64)
-        z = np.zeros(src.size, np.int64)
-        travel = _route_motion(ctx, pose, src, True).travel(ctx) if src.size else np.zeros(0)
-        return src, z, z, z - 1, travel
+        gs = ctx.grasps
+        full = src[src != NO_CONTACT] if members[NO_CONTACT] else np.zeros(0, np.int64)
+        z = np.zeros(full.size, np.int64)
+        travel = _route_motion(ctx, pose, full, True).travel(ctx) if full.size else np.zeros(0)
+        parts = [(full, z, z - 1, travel)]
+        if not ctx.world.gripper.fixed_width:
+            two = src[gs.n_touching[src] == 2]
+            for k in range(2):
+                pa, pb = _group_pairs(ctx.close_groups[k], two)
+                keep = members[pb] & (gs.n_touching[pb] == 1) & gs.touching[pb, k] & (gs.width[pb] > gs.width[pa] + EPS)
+                pa, pb = pa[keep], pb[keep]
+                parts.append((pa, pb, np.full(pa.size, k, np.int64), 0.5 * (gs.width[pb] - gs.width[pa])))
+        a, b, f, t = (np.concatenate(x) for x in zip(*parts))
+        return a, b, np.zeros(a.size, np.int64), f, t
 
     def motion(self, context: AdjustContext, pose: Pose, edges: IntraEdges) -> GripperMotion:
-        return _route_motion(context, pose, edges.src, True)
+        release = edges.dst == NO_CONTACT
+        if release.all():
+            return _route_motion(context, pose, edges.src, True)
+        gs = context.grasps
+        one = np.flatnonzero(~release)
+        a, b = edges.src[one], edges.dst[one]
+        leg = _linear(gs.gripper[a], gs.gripper[b], gs.width[a], gs.width[b])
+        _keep_finger(context, leg, a, edges.finger[one], FingerRole.FIXED)
+        if not release.any():
+            return _assemble(a, b, [leg])
+        full = np.flatnonzero(release)
+        route = _route_motion(context, pose, edges.src[full], True)
+        rest = [_linear(gs.gripper[b], gs.gripper[b], gs.width[b], gs.width[b]) for _ in range(route.n_legs - 1)]
+        both = GripperMotion.concat([route, _assemble(a, b, [leg] + rest)])
+        return both.take(np.argsort(np.concatenate([full, one]), kind="stable"))
 
     def check(self, context: AdjustContext, pose: Pose, edges: IntraEdges) -> CheckResult:
-        return _route_check(context, pose, edges.src)
+        release = edges.dst == NO_CONTACT
+        if release.all():
+            return _route_check(context, pose, edges.src)
+        if not release.any():
+            return super().check(context, pose, edges)
+        full, one = np.flatnonzero(release), np.flatnonzero(~release)
+        r1 = _route_check(context, pose, edges.src[full])
+        r2 = super().check(context, pose, edges.take(one))
+        ok = np.empty(len(edges), dtype=bool)
+        failure = np.empty(len(edges), dtype=np.int8)
+        ok[full], ok[one] = r1.ok, r2.ok
+        failure[full], failure[one] = r1.failure, r2.failure
+        return CheckResult(ok, failure, r1.feasibility_checks + r2.feasibility_checks, r1.samples + r2.samples)
 
 
 @REGISTRY.register("close", Family.ADJUST_GRASP)

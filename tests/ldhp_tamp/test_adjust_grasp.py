@@ -425,3 +425,25 @@ def test_a_pad_pivoting_about_its_contact_point_sticks(poly: Case):
     smp = ag.sample_motion(poly.ctx, ag.Pivot().motion(poly.ctx, T0, take))
     k = take.finger[smp.edge]
     assert (smp.mode[np.arange(len(smp)), k] == mechanics.ContactMode.STICKING).all()
+
+
+def test_open_lets_go_of_one_finger_the_reverse_of_close(poly: Case):
+    """``open`` from a pinch to finger k alone: finger k keeps its contact, the other
+    opens; every such edge is the reverse of a ``close`` edge."""
+    gs = poly.grasps
+    close = ag.Close().intra_edges(poly.ctx, T0, poly.gt)
+    members = np.isin(np.arange(len(gs)), poly.gt)
+    two = np.unique(close.dst)
+    opened = ag.Open().propose(poly.ctx, T0, two, members)
+    one = opened.dst != 0
+    assert one.any()
+    pairs = set(zip(opened.src[one].tolist(), opened.dst[one].tolist()))
+    assert {(int(b), int(a)) for a, b in zip(close.src, close.dst)} <= pairs
+    feasible = ag.Open().intra_edges(poly.ctx, T0, np.union1d(two, opened.dst[one]))
+    i = int(np.flatnonzero(feasible.dst != 0)[0])
+    step = poly.step(ag.Open(), feasible, i)
+    k = int(feasible.finger[i])
+    kept = {w.finger_contacts[k] for w in step.waypoints}
+    assert len(kept) == 1 and None not in kept  # finger k never lets go
+    assert step.waypoints[-1].finger_contacts[1 - k] is None
+    assert gs.width[feasible.dst[i]] > gs.width[feasible.src[i]]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ldhp_tamp.cli import main
@@ -301,3 +302,31 @@ def test_a_plan_the_simulation_always_refuses_fails_in_the_judge(monkeypatch: py
     assert f is not None and (f.tier, f.cause) == (FailureTier.JUDGE, FailureCause.DIVERGES_IN_SIMULATION)
     assert f.primitive == "air-move" and f.counts["judge_rejections"] >= 1
     assert any("a test's divergence" in a for a in f.attempts)
+
+
+def test_a_failing_segment_is_cut_where_the_object_rests_alone() -> None:
+    """Dichotomy refinement cuts a tip in the middle of its range, but a segment along
+    which the object rests on the environment alone is cut in the middle of that window,
+    where the gripper can let go and regrasp."""
+    import math
+
+    from geometry.contacts import contact_state
+    from geometry.kinematics import rotate_about, translate
+    from ldhp_tamp.path import Segment
+    from ldhp_tamp.tamp import _rest_cut
+
+    sc = load_scenario(scenarios_dir() / "task1_zero_mobility_lift.toml")
+    w = sc.world
+    motion = rotate_about(sc.start, w.object_vertices(sc.start)[1], -1)
+    end = motion.pose(math.radians(30.0))
+    tip = Segment("tip", contact_state(w, sc.start), contact_state(w, end), motion, 0.0, math.radians(30.0), w)
+    assert _rest_cut(tip) is None  # on its corner the block does not rest alone
+    push = Segment("push", contact_state(w, sc.start), contact_state(w, sc.start), translate(sc.start, (1.0, 0.0)),
+                   0.0, 40.0, w)
+    n = push.poses.shape[0]
+    at = _rest_cut(push)  # standing on the table it rests all along: the middle
+    assert at is not None and abs(at - (n - 1) / 2) <= 1
+    a, b = push.split(at)
+    assert a.poses.shape[0] == at + 1 and np.allclose(a.poses[-1], b.poses[0])
+    with pytest.raises(ValueError):
+        push.split(0)
