@@ -1,9 +1,8 @@
 """Time budgets: one deadline for a whole solve, checked cheaply wherever the search loops.
 
 A deadline is a value of :data:`clock` (by default :func:`time.perf_counter`), or ``None``
-for no limit. Stages that
-loop (the top-tier iterations, the streams, the grasp-graph search) call :func:`check`,
-which raises :class:`~ldhp_tamp.errors.TimeBudgetExceeded` once it has passed; the TAMP
+for no limit. Stages that loop (the top-tier iterations, the streams, the grasp-graph
+search) call :func:`check`, which raises :class:`~ldhp_tamp.errors.TimeBudgetExceeded` once it has passed; the TAMP
 loop turns that into a failed result (reason ``timeout: ...``). The symbolic engine call
 cannot be interrupted that way (pyperplan ignores unified-planning's timeout), so
 :mod:`ldhp_tamp.symbolic` can run it in a child process and kill it at the deadline. The
