@@ -329,6 +329,8 @@ def _parse(env: Environment, domain_text: str, problem_text: str | None,
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return PDDLReader(env).parse_problem_string(domain_text, problem_text)
+    except TimeBudgetExceeded:  # the solve's alarm interrupted the parse: not the domain's fault
+        raise
     except Exception as exc:  # the reader raises pyparsing, SyntaxError, UP and others
         line, col = getattr(exc, "lineno", None), getattr(exc, "col", None)
         where = f"{source}:{line}:{col}" if line is not None else source

@@ -294,6 +294,21 @@ def test_the_alarm_interrupts_an_engine_running_in_this_process(ldhp, blocked_en
             symbolic.solve(problem)  # no timeout: in this process, blocked until the alarm
 
 
+def test_an_alarm_during_the_domain_parse_is_a_timeout_not_a_domain_error(monkeypatch) -> None:
+    # the parse (unified-planning's reader, no checks of its own) is interrupted by the
+    # alarm when the budget is shorter than the setup: the solve must see the timeout
+    class Interrupted:
+        def __init__(self, env) -> None:  # noqa: ANN001 - unified-planning's Environment
+            pass
+
+        def parse_problem_string(self, domain_text, problem_text):
+            raise TimeBudgetExceeded("ldhp_tamp.symbolic._parse (interrupted: it has no deadline checks of its own)")
+
+    monkeypatch.setattr(symbolic, "PDDLReader", Interrupted)
+    with pytest.raises(TimeBudgetExceeded, match="symbolic._parse"):
+        symbolic.load_domain("ldhp")
+
+
 def test_the_alarm_stays_off_without_a_deadline_or_when_sigalrm_is_taken() -> None:
     with alarm(None):
         assert signal.getsignal(signal.SIGALRM) is signal.SIG_DFL and not alarm_armed()
