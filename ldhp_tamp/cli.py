@@ -162,14 +162,22 @@ def _print_failure(failure: Failure) -> None:
         print(f"    {i}. {attempt}")
 
 
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return value
+def _positive(what: str, positive: str) -> Callable[[str], float]:
+    """An argparse type: a finite positive number (``what`` and ``positive`` word the refusal)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not math.isfinite(value) or value <= 0:
+            raise argparse.ArgumentTypeError(f"expected {positive}, got {text!r}")
+        return value
+
+    return parse
+
+
+_seconds = _positive("a number of seconds", "a positive number of seconds")
+_speed = _positive("a speed in mm/s", "a positive speed in mm/s")
 
 
 def _comma_names(text: str) -> tuple[str, ...]:
@@ -297,16 +305,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         else:
             print(f"note: {args.gif} not written: nothing was simulated", file=sys.stderr)
     return EXIT_OK if report.executes else EXIT_NO_PLAN
-
-
-def _speed(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a speed in mm/s, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive speed in mm/s, got {text!r}")
-    return value
 
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {

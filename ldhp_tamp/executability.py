@@ -30,13 +30,14 @@ import numpy as np
 
 from geometry import collision, mechanics
 from geometry.forward import MAX_CONTACTS, alternative_motions, screw_velocity
-from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
+from geometry.poses import BoolArray, transform_points, wrap_angle
 from geometry.shapes import FloatArray
 from geometry.tolerances import PENETRATION_TOL
 from ldhp_tamp.plan import Plan
 from ldhp_tamp.scenario import Scenario
 from geometry.world import World
-from ldhp_tamp.validate import PlanArrays, PlanContacts, finger_offsets, plan_contacts, rotate_vectors
+from ldhp_tamp.validate import (PlanArrays, PlanContacts, PresentGroup, finger_offsets, plan_contacts,
+                                present_groups, rotate_vectors)
 
 __all__ = ["ForwardReport", "forward_check", "SQUEEZE_COS"]
 
@@ -107,14 +108,14 @@ def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: Float
     if cand.size == 0:
         return out
     # rests alone at pose i: the environment contacts present, full cones
-    cnt = env[cand].sum(axis=1)
     rests = np.zeros(cand.size, dtype=bool)
-    for kc in np.unique(cnt):
-        sel = np.flatnonzero(cnt == kc)
-        cols = np.argsort(~env[cand[sel]], axis=1, kind="stable")[:, :kc]
-        take = lambda a: np.take_along_axis(a[cand[sel]], cols[..., None] if a.ndim == 3 else cols, axis=1)  # noqa: E731
-        rests[sel] = mechanics.feasible_batch(mechanics.Contacts.make(take(c.points), take(c.normals), take(c.mu)),
-                                              com[cand[sel]], world.object.length_scale, margin=0.0)
+    for grp in present_groups(env[cand]):
+        def take(a: np.ndarray, grp: PresentGroup = grp) -> np.ndarray:
+            return grp.take(a[cand])
+
+        rests[grp.rows] = mechanics.feasible_batch(mechanics.Contacts.make(take(c.points), take(c.normals),
+                                                                           take(c.mu)),
+                                                   com[cand[grp.rows]], world.object.length_scale, margin=0.0)
     cand = cand[rests]
     if cand.size == 0:
         return out
@@ -181,14 +182,9 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
     todo &= count <= MAX_CONTACTS
     first: tuple[int, str] | None = None
     checked = 0
-    for kc in np.unique(count[todo]):
-        sel = np.flatnonzero(todo & (count == kc))
-        cols = np.argsort(~c.on[sel], axis=1, kind="stable")[:, :kc]
-
-        def take(a: np.ndarray, sel: IntArray = sel, cols: IntArray = cols) -> np.ndarray:
-            return np.take_along_axis(a[sel], cols[..., None] if a.ndim == 3 else cols, axis=1)
-
-        res = alternative_motions(take(c.points), take(c.normals), take(c.mu), np.ones((sel.size, kc), bool),
+    for grp in present_groups(c.on, todo):
+        sel, cols, take = grp.rows, grp.cols, grp.take
+        res = alternative_motions(take(c.points), take(c.normals), take(c.mu), np.ones(cols.shape, bool),
                                   take(other), com0[sel], L, planned[sel])
         checked += sel.size
         ambiguous[sel] = res.ambiguous

@@ -68,7 +68,7 @@ from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStatus
 from ldhp_tamp.scenario import Scenario, find_domain
 
 __all__ = ["RULES", "SLIP_TOL", "SUPPORT_ROUNDS", "PlanArrays", "PlanContacts", "SupportAnalysis", "ValidationReport",
-           "Violation", "domain_actions", "finger_offsets", "format_violation", "plan_contacts", "rotate_vectors",
+           "Violation", "domain_actions", "finger_offsets", "format_violation", "plan_contacts", "present_groups", "rotate_vectors",
            "support_analysis", "validate_plan"]
 
 log = logging.getLogger(__name__)
@@ -432,6 +432,29 @@ def plan_contacts(world: World, flat: PlanArrays) -> PlanContacts:
                      np.concatenate(ons, 1), tuple(labels), np.array(owner, dtype=np.int64))
 
 
+@dataclass(frozen=True, eq=False)
+class PresentGroup:
+    """Waypoints with the same number ``k`` of contact candidates present: their indices
+    ``rows`` and, per row, the ``k`` columns present, in order (``cols``, (r, k))."""
+
+    rows: IntArray
+    cols: IntArray
+
+    def take(self, a: np.ndarray) -> np.ndarray:
+        """The present columns of ``a`` (B, C) or (B, C, 2) at ``rows``: (r, k) or (r, k, 2)."""
+        return np.take_along_axis(a[self.rows], self.cols[..., None] if a.ndim == 3 else self.cols, axis=1)
+
+
+def present_groups(on: BoolArray, where: BoolArray | None = None) -> Iterator[PresentGroup]:
+    """The rows of ``on`` (B, C) with something present (and ``where``, if given), grouped
+    by how many columns are present: dense (r, k) batches for the cone tests and LPs."""
+    count = on.sum(axis=1)
+    keep = count > 0 if where is None else (count > 0) & where
+    for kc in np.unique(count[keep]):
+        rows = np.flatnonzero(keep & (count == kc))
+        yield PresentGroup(rows, np.argsort(~on[rows], axis=1, kind="stable")[:, :kc])
+
+
 #: Waypoints per block of rules 7-9 (bounds the memory for large environments).
 _BLOCK = 1024
 
@@ -511,13 +534,8 @@ def _support(world: World, flat: PlanArrays, max_force: float | None = None) -> 
         block = slice(start, min(start + _BLOCK, n_wp))
         c = plan_contacts(world, flat.take(block))
         mo = _motion(world, flat, np.arange(block.start, block.stop), c)
-        count = c.on.sum(axis=1)
-        for kc in np.unique(count[count > 0]):
-            rows = np.flatnonzero(count == kc)
-            cols = np.argsort(~c.on[rows], axis=1, kind="stable")[:, :kc]  # the candidates present
-
-            def take(a: np.ndarray, rows: IntArray = rows, cols: IntArray = cols) -> np.ndarray:
-                return np.take_along_axis(a[rows], cols[..., None] if a.ndim == 3 else cols, axis=1)
+        for grp in present_groups(c.on):
+            rows, cols, take = grp.rows, grp.cols, grp.take
 
             points, normals, mu, sliding = take(c.points), take(c.normals), take(c.mu), take(mo.sliding)
             com_r = com[block][rows]
@@ -663,13 +681,8 @@ def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUND
         block = slice(start, min(start + _BLOCK, n_wp))
         c = plan_contacts(world, flat.take(block))
         mo = _motion(world, flat, np.arange(block.start, block.stop), c)
-        count = c.on.sum(axis=1)
-        for kc in np.unique(count[count > 0]):
-            rows = np.flatnonzero(count == kc)
-            cols = np.argsort(~c.on[rows], axis=1, kind="stable")[:, :kc]
-
-            def take(a: np.ndarray, rows: IntArray = rows, cols: IntArray = cols) -> np.ndarray:
-                return np.take_along_axis(a[rows], cols[..., None] if a.ndim == 3 else cols, axis=1)
+        for grp in present_groups(c.on):
+            rows, cols, take = grp.rows, grp.cols, grp.take
 
             sliding = take(mo.sliding)
             modes = np.where(sliding, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING).astype(np.int8)
