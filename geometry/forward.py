@@ -234,6 +234,6 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
         ambiguous[hit] = True
         found_twist[hit] = xi[feas]
         back = np.zeros((hit.size, c), dtype=np.int8)
-        np.put_along_axis(back, order[hit], np.pad(modes[feas], ((0, 0), (0, max(c - k, 0))))[:, :c], axis=1)
+        np.put_along_axis(back, order[hit], modes[feas], axis=1)  # back to the caller's columns
         found_modes[hit] = back
     return ForwardCheck(ambiguous, found_twist, found_modes)
