@@ -14,7 +14,8 @@ always included). Edges:
 
 The start node is (0, g_start): the scenario's start grasp in the object frame (an extra
 row of the grasp set when it is not in the set exactly), or {0, 0} when the object
-starts free of the gripper. A goal node is (n, {0, 0}) under ``goal_release``, any
+starts free of the gripper; with ``start_grasp = "any"`` every grasp of G_(T_0) that holds
+the object still at T_0 is a start node, and the search starts from the cheapest. A goal node is (n, {0, 0}) under ``goal_release``, any
 (n, g) otherwise (the last segment's G_m already guarantees the grasp holds the object).
 
 Search: the graph's edges and costs are known up front (a layer's candidate intra-pose
@@ -411,17 +412,23 @@ class GraspPlanner:
         any other only through its ``intra_edges``, once per layer.
     start_grasp : GripperState or None
         The scenario's start grasp (world frame); ``None``: the object starts free of
-        the gripper (start node {0, 0}).
+        the gripper (start node {0, 0}), unless ``start_any``.
+    start_any : bool
+        ``start_grasp = "any"``: the start nodes are every grasp of G_T at the start pose
+        that holds the object still there (``AdjustContext.holds``); the search starts
+        from whichever gives the cheapest path.
     goal_release : bool
         The gripper must end out of contact (goal node {0, 0}).
     options : GraspGraphOptions, optional
     """
 
     def __init__(self, world: World, grasps: GraspSet, adjust: Iterable[Binding], start_grasp: GripperState | None = None,
-                 goal_release: bool = False, options: GraspGraphOptions | None = None) -> None:
+                 goal_release: bool = False, options: GraspGraphOptions | None = None, *,
+                 start_any: bool = False) -> None:
         self.world = world
         self.base = grasps
         self.start_grasp = start_grasp
+        self.start_any = bool(start_any) and start_grasp is None
         self.goal_release = bool(goal_release)
         self.options = options or GraspGraphOptions()
         prims = []
@@ -431,7 +438,7 @@ class GraspPlanner:
             prims.append(_Prim(b.name, b.implementation, isinstance(b.implementation, LazyAdjustGrasp)))
         self.primitives: tuple[_Prim, ...] = tuple(prims)
         self._start_key: bytes | None = None
-        self._start_index: int = NO_CONTACT
+        self._start_index: int | IntArray = NO_CONTACT  # the start nodes' grasps with start_any
         self._context: AdjustContext | None = None
         self._pose_sets: dict[bytes, IntArray] = {}
         self._motion_sets: dict[tuple[str, bytes], tuple[MotionGrasps, int]] = {}  # G_m, candidates
@@ -456,8 +463,9 @@ class GraspPlanner:
         return self.context.grasps
 
     @property
-    def start_index(self) -> int:
-        """The start node's grasp (0 when the object starts free of the gripper)."""
+    def start_index(self) -> int | IntArray:
+        """The start node's grasp (0 when the object starts free of the gripper); with
+        ``start_any``, the array of the start nodes' grasps."""
         return self._start_index
 
     def _prepare(self, start_pose: FloatArray) -> None:
@@ -481,6 +489,12 @@ class GraspPlanner:
         self._context = AdjustContext(self.world, gs, self.options.adjust)
         self._start_key = key
         self._start_index = index
+        if self.start_any:  # every grasp that holds the object at the start pose
+            held = np.zeros(len(gs), dtype=bool)
+            held[pose_conditioned(self.world, gs, start_pose, self.options.adjust.tol)] = True
+            held &= gs.n_touching >= 1
+            starts = np.flatnonzero(self._context.holds(start_pose, held) & held)
+            self._start_index = starts if starts.size else np.array([NO_CONTACT])
         self._pose_sets.clear()
         self._motion_sets.clear()
         self._cands.clear()
@@ -819,17 +833,19 @@ class GraspPlanner:
         opts = self.options
         release = self.goal_release if release is None else release
         lg = [self._layer_graph(c, len(ctx.grasps)) for c in cands]
-        start = self._start_index
+        starts = np.atleast_1d(self._start_index)
         exhausted = False
         fresh = opt is None  # else: its edge validity is current, its costs are not
         if opt is None:
-            opt = _Optimistic(layers, inter, lg, start, release, opts.max_intra_depth)
+            opt = _Optimistic(layers, inter, lg, self._start_index, release, opts.max_intra_depth)
         dirty: set[int] = set(range(len(layers)))
         while True:
             search.rounds += 1
             budget.check(deadline, "the bottom tier's grasp-graph search")
             fwd, bwd = opt.update(dirty) if fresh else opt.recompute(0, len(layers) - 1)
             fresh = True
+            # the cheapest start (one, unless start_grasp = "any")
+            start = int(starts[np.argmin(bwd[0][-1][starts])])
             best = float(bwd[0][-1][start])
             if not math.isfinite(best):
                 return None, [], [f[-1] for f in fwd], False

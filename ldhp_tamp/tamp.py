@@ -288,11 +288,6 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     world = scenario.world
     if settings.friction_margin > 0:
         world = replace(world, friction=world.friction.scaled(1.0 - settings.friction_margin))
-    if scenario.start_grasp_any:
-        what = "setup: start_grasp = \"any\" (a held start whose grasp the planner chooses) is not supported yet"
-        return _failed(scenario, engine, _Attempt(
-            f"{what}; give the start grasp as {{ gripper = [x, y, phi], width = w }}", FailureTier.SETUP,
-            FailureCause.UNSUPPORTED_INPUT, what=what), c, clock)
 
     try:
         ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples,
@@ -309,7 +304,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     transitions = admissible_transitions(ctx, domain.info, REGISTRY)
     adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
     grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release,
-                                 GraspGraphOptions(helper=options.helpers))
+                                 GraspGraphOptions(helper=options.helpers), start_any=scenario.start_grasp_any)
     clock.setup = budget.clock() - clock.start
     budget.check(deadline, "the setup (contact-state graph, admissible transitions)")
     say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "

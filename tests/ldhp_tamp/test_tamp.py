@@ -330,3 +330,18 @@ def test_a_failing_segment_is_cut_where_the_object_rests_alone() -> None:
     assert a.poses.shape[0] == at + 1 and np.allclose(a.poses[-1], b.poses[0])
     with pytest.raises(ValueError):
         push.split(0)
+
+
+def test_start_grasp_any_starts_from_a_grasp_that_holds_the_object() -> None:
+    """``start_grasp = "any"``: the search starts from every grasp that holds the block
+    at its start pose in the air and takes the cheapest; the plan's first waypoint shows
+    it, and the plan is judged like any other."""
+    sc = load_scenario(scenarios_dir() / "example_place_any.toml")
+    assert sc.start_grasp is None and sc.start_grasp_any
+    result = solve(sc)
+    assert result.status is SolveStatus.SOLVED
+    plan = result.plan
+    assert validate_plan(plan, sc).valid and forward_check(plan, sc).ok
+    first = plan.steps[0].waypoints[0]
+    assert all(c is not None for c in first.finger_contacts)  # held by a pinch from the start
+    assert plan.steps[0].primitive == "air-move"
