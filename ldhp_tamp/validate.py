@@ -501,6 +501,37 @@ def _motion(world: World, flat: PlanArrays, rows: IntArray, c: PlanContacts) -> 
 
 
 @dataclass(frozen=True, eq=False)
+class _SupportBatch:
+    """Waypoints with the same number of contacts present, as dense batches: rule 7's
+    contacts (all sticking) and rule 8's (the motion's contact modes)."""
+
+    rows: IntArray  # (r,) global waypoint indices
+    fingers: IntArray  # (r, k) the finger of each contact present, -1 for the environment
+    full: mechanics.Contacts  # every contact with its whole cone
+    moving: mechanics.Contacts  # the contacts that slip over the motion to the next waypoint SLIDING
+    slips: BoolArray  # (r,) some contact slips
+    com: FloatArray  # (r, 2) the world centre of mass
+
+
+def _support_batches(world: World, flat: PlanArrays) -> Iterator[_SupportBatch]:
+    """Every waypoint with a contact present, block by block (``_BLOCK`` waypoints, for
+    memory) and grouped by how many (:func:`present_groups`)."""
+    n_wp = len(flat)
+    com = transform_points(flat.obj, world.object.com)[:, 0] if n_wp else np.zeros((0, 2))
+    for start in range(0, n_wp, _BLOCK):
+        block = slice(start, min(start + _BLOCK, n_wp))
+        c = plan_contacts(world, flat.take(block))
+        mo = _motion(world, flat, np.arange(block.start, block.stop), c)
+        for grp in present_groups(c.on):
+            take = grp.take
+            points, normals, mu, sliding = take(c.points), take(c.normals), take(c.mu), take(mo.sliding)
+            modes = np.where(sliding, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING).astype(np.int8)
+            yield _SupportBatch(start + grp.rows, c.finger[grp.cols], mechanics.Contacts.make(points, normals, mu),
+                                mechanics.Contacts.make(points, normals, mu, modes, take(mo.slide_dirs)),
+                                sliding.any(axis=1), com[block][grp.rows])
+
+
+@dataclass(frozen=True, eq=False)
 class _Support:
     """Rules 7-9 at every waypoint."""
 
@@ -528,35 +559,23 @@ def _support(world: World, flat: PlanArrays, max_force: float | None = None) -> 
     ok9 = np.ones(n_wp, dtype=bool)
     force = np.full(n_wp, np.nan)
     lps = 0
-    com = transform_points(flat.obj, world.object.com)[:, 0]  # (B, 2)
     scale = world.object.length_scale
-    for start in range(0, n_wp, _BLOCK):
-        block = slice(start, min(start + _BLOCK, n_wp))
-        c = plan_contacts(world, flat.take(block))
-        mo = _motion(world, flat, np.arange(block.start, block.stop), c)
-        for grp in present_groups(c.on):
-            rows, cols, take = grp.rows, grp.cols, grp.take
-
-            points, normals, mu, sliding = take(c.points), take(c.normals), take(c.mu), take(mo.sliding)
-            com_r = com[block][rows]
-            g = start + rows
-            ok7[g] = mechanics.feasible_batch(mechanics.Contacts.make(points, normals, mu), com_r, scale, margin=0.0)
-            ok8[g] = ok7[g]
-            modes = np.where(sliding, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING).astype(np.int8)
-            moving = mechanics.Contacts.make(points, normals, mu, modes, take(mo.slide_dirs))
-            slips = ok7[g] & sliding.any(axis=1)
-            if slips.any():
-                ok8[g[slips]] = mechanics.feasible_batch(moving.select(slips), com_r[slips], scale, margin=0.0)
-            if max_force is None:
-                continue
-            fingers = c.finger[cols]  # (r, kc)
-            need = ok8[g] & (fingers >= 0).any(axis=1)
-            if need.any():
-                r = mechanics.bounded_support(moving.select(need), com_r[need], scale, world.object.weight,
-                                              fingers[need], max_force, margin=0.0)
-                ok9[g[need]] = r.feasible
-                force[g[need]] = r.max_finger_force
-                lps += int(need.sum())
+    for b in _support_batches(world, flat):
+        g = b.rows
+        ok7[g] = mechanics.feasible_batch(b.full, b.com, scale, margin=0.0)
+        ok8[g] = ok7[g]
+        slips = ok7[g] & b.slips
+        if slips.any():
+            ok8[g[slips]] = mechanics.feasible_batch(b.moving.select(slips), b.com[slips], scale, margin=0.0)
+        if max_force is None:
+            continue
+        need = ok8[g] & (b.fingers >= 0).any(axis=1)
+        if need.any():
+            r = mechanics.bounded_support(b.moving.select(need), b.com[need], scale, world.object.weight,
+                                          b.fingers[need], max_force, margin=0.0)
+            ok9[g[need]] = r.feasible
+            force[g[need]] = r.max_finger_force
+            lps += int(need.sum())
     return _Support(ok7, ok8, ok9, force, lps)
 
 
@@ -675,27 +694,16 @@ def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUND
     forces = np.full((n_wp, 2, 2), np.nan)
     largest = np.full(n_wp, np.nan)
     max_force = getattr(world.gripper, "max_force", None)
-    com = transform_points(flat.obj, world.object.com)[:, 0] if n_wp else np.zeros((0, 2))
     scale = world.object.length_scale
-    for start in range(0, n_wp, _BLOCK):
-        block = slice(start, min(start + _BLOCK, n_wp))
-        c = plan_contacts(world, flat.take(block))
-        mo = _motion(world, flat, np.arange(block.start, block.stop), c)
-        for grp in present_groups(c.on):
-            rows, cols, take = grp.rows, grp.cols, grp.take
-
-            sliding = take(mo.sliding)
-            modes = np.where(sliding, mechanics.ContactMode.SLIDING, mechanics.ContactMode.STICKING).astype(np.int8)
-            moving = mechanics.Contacts.make(take(c.points), take(c.normals), take(c.mu), modes, take(mo.slide_dirs))
-            com_r, g = com[block][rows], start + rows
-            need[g] = _friction_needed(moving, com_r, scale, rounds)
-            fingers = c.finger[cols]  # (r, kc)
-            lp = np.isfinite(need[g]) & (fingers >= 0).any(axis=1)
-            if lp.any():
-                r = mechanics.bounded_support(moving.select(lp), com_r[lp], scale, world.object.weight,
-                                              fingers[lp], max_force, margin=0.0)
-                forces[g[lp]] = r.finger_forces
-                largest[g[lp]] = r.max_finger_force
+    for b in _support_batches(world, flat):
+        g = b.rows
+        need[g] = _friction_needed(b.moving, b.com, scale, rounds)
+        lp = np.isfinite(need[g]) & (b.fingers >= 0).any(axis=1)
+        if lp.any():
+            r = mechanics.bounded_support(b.moving.select(lp), b.com[lp], scale, world.object.weight,
+                                          b.fingers[lp], max_force, margin=0.0)
+            forces[g[lp]] = r.finger_forces
+            largest[g[lp]] = r.max_finger_force
     forces[~flat.declared] = np.nan  # a finger without contact has no force
     # No contact at all: the weight is not balanced (rule 7 fails), need stays inf.
     return SupportAnalysis(need, forces, largest, flat.step, flat.local)
