@@ -197,6 +197,12 @@ class GraspPlanResult:
     timings : Mapping[str, float]
         Seconds per stage: ``pose_sets``, ``motion_sets``, ``candidates``, ``search``,
         ``steps``.
+    candidates : int or None
+        NO_GRASP_FOR_SEGMENT: the grasps tried on the failing segment (collision-free at
+        both its ends).
+    at_goal : bool
+        NO_PATH: the goal layer is reached but the goal condition (a release) cannot be
+        met; otherwise forward reachability dies at ``failing_segment``.
     """
 
     status: GraspPlanStatus
@@ -218,6 +224,8 @@ class GraspPlanResult:
     intra_feasible: int = 0
     by_primitive: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
     timings: Mapping[str, float] = field(default_factory=dict)
+    candidates: int | None = None
+    at_goal: bool = False
 
     @property
     def solved(self) -> bool:
@@ -708,6 +716,7 @@ class GraspPlanner:
                           f"quasi-statically feasible at all {seg.poses.shape[0]} samples"
                           + (" (check budget ran out)" if mg.truncated else ""))
                 return GraspPlanResult(GraspPlanStatus.NO_GRASP_FOR_SEGMENT, failing_segment=k, reason=reason,
+                                       candidates=n_cand,
                                        nodes=sum(layer.size for layer in layers), edges=sum(motion_sizes),
                                        feasibility_checks=checks, time_s=time.perf_counter() - t_start,
                                        layer_sizes=tuple(layer.size for layer in layers),
@@ -777,7 +786,7 @@ class GraspPlanner:
             reason = self._failure_reason(segments, layers, inter, reached, k, search, exhausted)
             log.info("grasp graph: no path (%s)", reason)
             return GraspPlanResult(GraspPlanStatus.NO_PATH, failing_segment=failing, reason=reason,
-                                   feasibility_checks=checks, time_s=time.perf_counter() - t_start,
+                                   at_goal=k >= n, feasibility_checks=checks, time_s=time.perf_counter() - t_start,
                                    timings=timings, **common)
 
         # Steps.

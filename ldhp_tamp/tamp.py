@@ -665,21 +665,16 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         return _BottomOutcome(segment=seg, reason=why, attempt=_grasp_failure(res, seg, k, why))
 
 
-_CANDIDATES = re.compile(r"none of the (\d+) grasps")
-
-
 def _grasp_failure(res: GraspPlanResult, seg: Segment, k: int, text: str) -> _Attempt:
     """The grasp graph's failure at segment ``k`` in structure: an empty G_m, forward
     reachability dying, or no grasp sequence to the goal."""
-    candidates = None
+    candidates = res.candidates
     if res.status is GraspPlanStatus.NO_GRASP_FOR_SEGMENT:
-        found = _CANDIDATES.search(res.reason)  # the grasps collision-free at both ends, all tried
-        candidates = int(found.group(1)) if found else (res.layer_sizes[k] if k < len(res.layer_sizes) else None)
         cause = FailureCause.EMPTY_MOTION_SET
         what = "no grasp executes it" + ("" if candidates is None else f" ({candidates} candidates)")
-    elif "forward reachability dies" in res.reason:
+    elif res.status is GraspPlanStatus.NO_PATH and not res.at_goal and res.failing_segment is not None:
         cause, what = FailureCause.UNREACHABLE, "no grasp sequence from the start reaches a grasp that executes it"
-    elif "cannot release" in res.reason:
+    elif res.at_goal:
         cause, what = FailureCause.NO_GRASP_PATH, "the gripper cannot release the object at the goal"
     else:
         cause, what = FailureCause.NO_GRASP_PATH, "no grasp sequence reaches the goal"
