@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry.collision import eroded_environment, object_env_overlap
 from geometry.features import Contact, ContactKind, ContactState
-from geometry.poses import BoolArray, IntArray, Pose, wrap_angle
+from geometry.poses import BoolArray, IntArray, Pose, transform_points, wrap_angle
 from geometry.shapes import FloatArray
 from geometry.tolerances import CONTACT_TOL, EPS, PENETRATION_TOL
 from geometry.world import World
@@ -60,6 +60,7 @@ __all__ = [
     "RelevantFeatures",
     "StateWitness",
     "principal_contact_masks",
+    "rests_alone",
     "principal_contacts",
     "contact_state",
     "contact_points",
@@ -377,6 +378,25 @@ def contact_point_arrays(world: World, poses: ArrayLike, tol: float = CONTACT_TO
     live = np.zeros((b, c), dtype=bool)
     out_p[pose, slot], out_n[pose, slot], out_mu[pose, slot], live[pose, slot] = pts[order], nrm[order], mu[order], True
     return out_p, out_n, out_mu, live
+
+
+def rests_alone(world: World, poses: ArrayLike, mu_scale: float = 1.0, tol: float = CONTACT_TOL) -> BoolArray:
+    """(B,) whether the object rests on the environment alone at each pose: its contacts
+    there (:func:`contact_point_arrays`), all STICKING with every coefficient times
+    ``mu_scale``, balance its weight (:func:`geometry.mechanics.feasible_batch`); False
+    where it touches nothing."""
+    from geometry import mechanics  # mechanics is the lower layer; imported where used
+
+    p = _as_poses(poses)
+    pts, nrm, mu, live = contact_point_arrays(world, p, tol)
+    out = live.any(axis=1)
+    if out.any():
+        modes = np.where(live, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT).astype(np.int8)
+        com = transform_points(p[out], world.object.com)[:, 0]
+        c = mechanics.Contacts.make(pts[out], np.where(live[out][..., None], nrm[out], 0.0),
+                                    np.where(live[out], mu[out] * mu_scale, 0.0), modes[out])
+        out[out] = mechanics.feasible_batch(c, com, world.object.length_scale)
+    return out
 
 
 def _mu_tables(world: World) -> tuple[FloatArray, FloatArray, FloatArray]:

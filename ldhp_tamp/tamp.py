@@ -27,10 +27,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from geometry import mechanics
-from geometry.contacts import contact_point_arrays
+from geometry.contacts import rests_alone
 from geometry.grasps import GraspOptions, enumerate_grasps
-from geometry.poses import transform_points
 from ldhp_tamp import budget, symbolic
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
@@ -573,19 +571,10 @@ def _rest_cut(seg: Segment) -> int | None:
     coefficient), so that the gripper can let go and regrasp there (``open``,
     ``approach-contact``: windows a fraction of a degree wide are found from the statics
     of the segment's own samples); ``None`` (the middle of the range) when there is none."""
-    world = seg.world
     poses = np.asarray(seg.poses, dtype=float)
-    n = poses.shape[0]
-    if n < 3:
+    if poses.shape[0] < 3:
         return None
-    pts, nrm, mu, live = contact_point_arrays(world, poses[1:-1])
-    if not live.any():
-        return None
-    com = transform_points(poses[1:-1], world.object.com)[:, 0]
-    modes = np.where(live, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT).astype(np.int8)
-    rests = mechanics.feasible_batch(mechanics.Contacts.make(pts, np.where(live[..., None], nrm, 0.0),
-                                                             np.where(live, mu * REST_FRICTION, 0.0), modes),
-                                     com, world.object.length_scale) & live.any(axis=1)
+    rests = rests_alone(seg.world, poses[1:-1], REST_FRICTION)
     if not rests.any():
         return None
     edges = np.diff(np.concatenate([[0], rests.astype(np.int8), [0]]))

@@ -56,7 +56,7 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from geometry import collision, mechanics
-from geometry.contacts import contact_points
+from geometry.contacts import contact_points, rests_alone
 from geometry.grasps import NO_CONTACT, FingerPart, GraspSet
 from geometry.poses import BoolArray, IntArray, Pose, compose_batch, wrap_angle
 from geometry.shapes import FloatArray, segment_distances
@@ -608,12 +608,7 @@ class AdjustContext:
     def _make_layer(self, p: FloatArray) -> LayerData:
         world = self.world
         cp = contact_points(world, Pose.from_array(p), self.options.contact_tol)
-        com = Pose.from_array(p).apply(world.object.com)
-        if len(cp):
-            c = mechanics.Contacts.make(cp.points, cp.normals, cp.mu, mechanics.ContactMode.STICKING)
-            rests = bool(mechanics.feasible_batch(c, com, world.object.length_scale)[0])
-        else:
-            rests = False
+        rests = bool(rests_alone(world, p[None], tol=self.options.contact_tol)[0])
         verts = world.object_vertices(Pose.from_array(p))
         w_home = float(world.gripper.width_range[1])
         reach = float(self.body_reach(w_home)[0])
