@@ -82,6 +82,11 @@ class SolveOptions:
     """On a machine with more than one core, let a helper process (forked by the bottom
     tier with the grasp set) take half of the G_T and G_m computations and of the streams'
     sweeps; the plans are the same either way."""
+    feedback: bool = True
+    """Feed a failed pose path back to the symbolic tier as constraints (the failing
+    transitions are forbidden); ``False`` (the ``ldhp-nofeedback`` planner): nothing is
+    forbidden and the symbolic tier re-plans blind, each iteration drawing other stream
+    samples from the same generator."""
 
 
 @dataclass
@@ -438,6 +443,9 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                                 f"no in-state motion reaches the goal without leaving {within}")), c, clock)
             if deepest is None:
                 return _give_up(scenario, engine, " (the contact-state plan needs no object motion)", c, clock)
+            if not options.feedback:
+                say(f"iteration {iteration} failed; re-planning without feedback")
+                continue
             culprits = _culprits(planned, deepest, forbidden)
             forbidden.update(culprits)
             c.forbidden = len(forbidden)
