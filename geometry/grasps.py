@@ -81,7 +81,10 @@ class GraspOptions:
     Attributes
     ----------
     samples_per_edge : int
-        ``K``: contact samples per object edge, at ``t = (k + 1/2) / K``, ``k < K``.
+        ``K``: contact samples per object edge, at ``t = (k + u) / K``, ``k < K``.
+    edge_offsets : tuple of float, optional
+        ``u`` per object edge, each in ``[0, 1)`` (a planner draws them from its seed);
+        ``None``: ``u = 1/2`` on every edge.
     vertex_fan : int
         Normals sampled strictly inside the normal fan of each convex object vertex
         (evenly, excluding the two edge normals, which the edge samples cover).
@@ -110,6 +113,7 @@ class GraspOptions:
     """
 
     samples_per_edge: int = 100
+    edge_offsets: tuple[float, ...] | None = None
     vertex_fan: int = 3
     orientations: int = 8
     closing_angles_deg: tuple[float, ...] = (0.0, -15.0, 15.0, -30.0, 30.0)
@@ -122,6 +126,10 @@ class GraspOptions:
     def __post_init__(self) -> None:
         if self.samples_per_edge < 1:
             raise GeometryError(f"grasp options: samples_per_edge must be >= 1, got {self.samples_per_edge}")
+        if self.edge_offsets is not None:
+            object.__setattr__(self, "edge_offsets", tuple(float(u) for u in self.edge_offsets))
+            if any(not 0.0 <= u < 1.0 for u in self.edge_offsets):
+                raise GeometryError("grasp options: edge_offsets are fractions in [0, 1)")
         if self.vertex_fan < 0 or self.orientations < 0:
             raise GeometryError("grasp options: vertex_fan and orientations must be >= 0")
         if any(not 0.0 <= f <= 1.0 for f in self.pad_heights + self.free_widths):
@@ -310,12 +318,16 @@ class _Samples:
     feature: IntArray  # (S,) edge i or N + vertex j
 
 
-def _boundary_samples(poly: Polygon, k: int, n_fan: int) -> _Samples:
-    """``k`` samples per edge at ``t = (i + 1/2) / k`` plus ``n_fan`` fan normals per
-    convex vertex (strictly between its two edge normals)."""
+def _boundary_samples(poly: Polygon, k: int, n_fan: int, offsets: tuple[float, ...] | None = None) -> _Samples:
+    """``k`` samples per edge at ``t = (i + u) / k`` (``u`` the edge's offset, 1/2 by
+    default) plus ``n_fan`` fan normals per convex vertex (strictly between its two edge
+    normals)."""
     n = len(poly)
-    t = (np.arange(k) + 0.5) / k
-    pts = poly.vertices[:, None, :] + t[None, :, None] * poly.edge_vectors[:, None, :]
+    if offsets is not None and len(offsets) != n:
+        raise GeometryError(f"grasp options: {len(offsets)} edge_offsets for an object of {n} edges")
+    u = np.full(n, 0.5) if offsets is None else np.asarray(offsets, dtype=float)
+    t = (np.arange(k)[None, :] + u[:, None]) / k  # (n, k)
+    pts = poly.vertices[:, None, :] + t[:, :, None] * poly.edge_vectors[:, None, :]
     nrm = np.broadcast_to(poly.normals[:, None, :], (n, k, 2))
     feat = np.broadcast_to(np.arange(n)[:, None], (n, k))
     points, normals, features = [pts.reshape(-1, 2)], [nrm.reshape(-1, 2)], [feat.reshape(-1)]
@@ -858,7 +870,7 @@ def enumerate_grasps(world: World, options: GraspOptions | None = None) -> Grasp
     opts = options or GraspOptions()
     grip = world.gripper
     poly = world.object.polygon
-    smp = _boundary_samples(poly, opts.samples_per_edge, opts.vertex_fan)
+    smp = _boundary_samples(poly, opts.samples_per_edge, opts.vertex_fan, opts.edge_offsets)
     pad: _Pad | None = None
     if isinstance(grip, TwoPointGripper):
         pairs = _two_point_pairs(world, grip, smp, opts)

@@ -656,3 +656,30 @@ def test_samples_known_collision_free_are_not_tested_again_and_change_nothing() 
     # with every sample declared free, only the quasi-static test decides: a superset
     loose = motion_conditioned(world, gs, path, cand, free_at=np.arange(len(path)))
     assert set(plain.indices) <= set(loose.indices)
+
+
+# --------------------------------------------------------------------------- per-edge offsets
+
+
+def test_edge_offsets_move_the_edge_samples_and_default_to_the_middle():
+    world = make_world(TwoPointGripper(R, (0.0, 140.0)))
+    k = 4
+    mid = enumerate_grasps(world, GraspOptions(samples_per_edge=k))
+    same = enumerate_grasps(world, GraspOptions(samples_per_edge=k, edge_offsets=(0.5,) * 4))
+    assert np.array_equal(mid.arclength, same.arclength, equal_nan=True)
+    off = enumerate_grasps(world, GraspOptions(samples_per_edge=k, edge_offsets=(0.1, 0.5, 0.9, 0.25)))
+    # contacts on edge l1 (from v1, length 70) at t = (i + 0.1) / 4 of it, none at the middles
+    def at(gs: GraspSet, edge: int, s: float) -> bool:
+        return bool(np.any(np.isclose(gs.arclength[gs.feature == edge], s, atol=1e-6)))
+
+    for i in range(k):
+        assert at(off, 0, 70.0 * (i + 0.1) / k) and not at(off, 0, 70.0 * (i + 0.5) / k)
+        assert at(mid, 0, 70.0 * (i + 0.5) / k) and not at(mid, 0, 70.0 * (i + 0.1) / k)
+        assert at(off, 1, 70.0 + 150.0 * (i + 0.5) / k)
+
+
+@pytest.mark.parametrize("offsets", [(0.5, 0.5, 0.5), (0.5, 0.5, 1.0, 0.5), (-0.1, 0.5, 0.5, 0.5)])
+def test_edge_offsets_are_checked(offsets):
+    world = make_world(TwoPointGripper(R, (0.0, 140.0)))
+    with pytest.raises(GeometryError, match="edge_offsets"):
+        enumerate_grasps(world, GraspOptions(samples_per_edge=4, edge_offsets=offsets))
