@@ -476,6 +476,17 @@ class GraspPlanner:
         ``start_any``, the array of the start nodes' grasps."""
         return self._start_index
 
+    def prepare(self, start_pose: Sequence[float] | FloatArray) -> None:
+        """Fix the grasp set (:attr:`grasps`, :attr:`context`, :attr:`start_index`) for a
+        path starting at ``start_pose``, as :meth:`plan` does (for other planners on the
+        same grasp set, e.g. :mod:`ldhp_tamp.baselines.contact_rrt`)."""
+        self._prepare(np.asarray(start_pose, dtype=float))
+
+    def move_step(self, segment: Segment, g: int) -> Step:
+        """The MoveObject plan step of ``segment`` carrying grasp ``g`` (as in the plans
+        :meth:`plan` makes)."""
+        return self._move_step(self.context, segment, g)
+
     def _prepare(self, start_pose: FloatArray) -> None:
         """Fix the grasp set for a path starting at ``start_pose`` (the start grasp's
         row depends on it); the caches are reset when it changes."""
