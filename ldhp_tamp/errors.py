@@ -56,3 +56,9 @@ class TimeBudgetExceeded(LdhpError):
     def __init__(self, where: str):
         self.where = where
         super().__init__(f"time budget exceeded in {where}")
+
+
+class ExecutorError(InputError):
+    """A sweep executor that cannot be used (``--executor dask`` without the
+    ``distributed`` package, a ``--scheduler`` that cannot be reached): the CLI answers
+    it with exit status 2, before any cell has run."""
