@@ -171,15 +171,24 @@ def _seg(name: str, state: ContactState, motion: Motion, s_end: float, ctx: Plan
     return Segment(name, state, state, motion, 0.0, s_end, ctx.world, p)
 
 
+#: How far (a fraction of the stretch, either way) a seeded repositioning fraction below 1
+#: may be moved from its nominal value: a quarter-width bin around it.
+REPOSITION_JITTER = 0.125
+
+
 def reposition(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry, state: ContactState,
-               pose: Pose, fractions: Sequence[float] = REPOSITION_FRACTIONS) -> list[Segment]:
+               pose: Pose, fractions: Sequence[float] = REPOSITION_FRACTIONS,
+               rng: np.random.Generator | None = None) -> list[Segment]:
     """In-state motions from ``pose``: for every motion family of every MoveObject
     primitive the domain declares, the stretch over which the object stays in ``state``,
     sampled at ``fractions`` of its length (shorter than ``REPOSITION_MIN_MM`` of vertex
     motion is skipped). These are the "short motions within a state" of the paper's
     Sub-step 2, used here before a transition as well as at the ends: a transition that
     is admissible from one pose of a state may be blocked from another (a block standing
-    20 mm from a wall cannot tip towards it, but can once pushed along the floor)."""
+    20 mm from a wall cannot tip towards it, but can once pushed along the floor).
+
+    With ``rng``, each fraction below 1 is drawn within ``REPOSITION_JITTER`` of its
+    nominal value (one draw per fraction); the full stretch (1) stays."""
     stretches: list[tuple[str, Motion, float, float, dict]] = []
     for name in domain.names(Family.MOVE_OBJECT):
         impl = registry.implementation(name)
@@ -197,6 +206,9 @@ def reposition(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegi
                 # keep clear of the state's boundary
                 stay -= min(REPOSITION_MARGIN_MM / max(speed, 1e-9), 0.25 * stay)
             stretches.append((name, motion, stay, speed, params))
+    if rng is not None:
+        fractions = [f if f >= 1.0 else f + float(rng.uniform(-REPOSITION_JITTER, REPOSITION_JITTER))
+                     for f in fractions]
     out: list[Segment] = []
     for f in fractions:  # every family at the first fraction, then at the next one, ...
         for name, motion, stay, speed, params in stretches:
@@ -364,15 +376,16 @@ class PathSearch:
         # repositioning sweeps every family of every primitive: a sample call's worth each
         if not self._charge(len(self.domain.names(Family.MOVE_OBJECT))):
             return
-        scored: list[tuple[float, int, tuple[Segment, ...]]] = []
-        for pre in reposition(self.ctx, self.domain, self.registry, t.from_state, pose)[:MAX_REPOSITIONS]:
+        scored: list[tuple[float, float, tuple[Segment, ...]]] = []
+        for pre in reposition(self.ctx, self.domain, self.registry, t.from_state, pose,
+                              rng=self.rng)[:MAX_REPOSITIONS]:
             self.stats.repositions += 1
             samples = self._sample(impl, t, pre.end)
             if samples is None:
                 break
             for moves in samples:
                 end = moves[-1].poses[-1:]
-                scored.append((float(self.ctx.goal_distance(end)[0]), len(scored), (pre,) + moves))
+                scored.append((float(self.ctx.goal_distance(end)[0]), float(self.rng.random()), (pre,) + moves))
         scored.sort(key=lambda x: (x[0], x[1]))
         for _, _, moves in scored[:self.limit]:
             yield moves

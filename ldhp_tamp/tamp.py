@@ -46,6 +46,11 @@ from ldhp_tamp.validate import support_analysis, validate_plan
 log = logging.getLogger(__name__)
 
 
+#: Where the per-edge offset u of the grasp samples t = (k + u)/K is drawn (uniformly,
+#: from the seed): clear of the ends, so that no edge sample sits on a vertex.
+EDGE_OFFSET_RANGE = (0.05, 0.95)
+
+
 class SolveStatus(enum.Enum):
     SOLVED = "solved"
     FAILED = "failed"
@@ -281,7 +286,9 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     l_max = settings.max_refinements if options.max_refinements is None else options.max_refinements
     k_samples = options.samples_per_edge or settings.samples_per_edge
     seed = settings.seed if options.seed is None else options.seed
-    rng = np.random.default_rng(seed)
+    # One seed, independent streams (a change in how one stage draws leaves the others'
+    # draws alone): the grasp samples' per-edge offsets, then the object-pose streams.
+    grasp_rng, rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     say = progress or (lambda _msg: None)
 
     domain = symbolic.load_checked_domain(options.domain if options.domain is not None
@@ -301,7 +308,8 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                                                   what=_short(text)), c, clock)
     c.contact_state_nodes = len(ctx.states)
     budget.check(deadline, "the setup (contact states)")
-    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples))
+    offsets = tuple(float(u) for u in grasp_rng.uniform(*EDGE_OFFSET_RANGE, size=world.object.n))
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples, edge_offsets=offsets))
     budget.check(deadline, "the setup (grasp enumeration)")
     ctx = replace(ctx, grasps=grasps)  # air-move lifts and placements need a carrying grasp
     transitions = admissible_transitions(ctx, domain.info, REGISTRY)

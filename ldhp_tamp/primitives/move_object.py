@@ -11,9 +11,9 @@ for ``tip``, edge directions for ``push``, pairs of kept contacts and senses for
   family from the actual pose T_k; where the sweep leaves ``from_state`` directly into
   ``to_state``, propose end parameters: the end of the sweep where a new contact is made,
   or, when ``to_state`` holds over an interval, a few values in it (its two ends less a
-  margin, its middle, and the value closest to the goal), ranked by the distance of the
-  resulting pose to the goal contact pose T'_g (paper: samples limited and ranked by a
-  light heuristic).
+  margin, a value drawn in it, and the value closest to the goal), ranked by the distance
+  of the resulting pose to the goal contact pose T'_g (paper: samples limited and ranked
+  by a light heuristic), ties broken at random. Every draw comes from the solve's seed.
 """
 
 from __future__ import annotations
@@ -110,14 +110,14 @@ class _Swept:
 
     def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
                start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment]:
-        scored: list[tuple[float, int, Segment]] = []
+        scored: list[tuple[float, float, Segment]] = []
         families = list(self.families(ctx, start_pose))
         sweeps = _stream_sweeps(ctx, [(motion, s_max) for motion, s_max, _ in families])
         for (motion, s_max, params), sw in zip(families, sweeps):
-            for s_end in _end_values(ctx, sw, from_state, to_state):
+            for s_end in _end_values(ctx, sw, from_state, to_state, rng):
                 seg = self._segment(ctx, motion, s_end, from_state, to_state, params)
                 score = float(ctx.goal_distance(seg.poses[-1:])[0])
-                scored.append((score, len(scored), seg))
+                scored.append((score, float(rng.random()), seg))  # ties broken at random
         scored.sort(key=lambda t: (t[0], t[1]))
         for _, _, seg in scored[:limit]:
             yield seg
@@ -151,8 +151,19 @@ def _helper_sweep(state: tuple[Any, ...], motion: Motion, s_max: float) -> Sweep
     return sweep(state[0], motion, s_max)
 
 
-def _end_values(ctx: PlanningContext, sw: Sweep, from_state: ContactState, to_state: ContactState) -> list[float]:
-    """End parameters where ``sw`` goes from ``from_state`` straight into ``to_state``."""
+#: Where the halfway values between the goal value and an end of the interval may lie,
+#: as fractions of the way (drawn uniformly from the seed; 1/2 without a generator).
+HALFWAY_RANGE = (0.25, 0.75)
+
+
+def _end_values(ctx: PlanningContext, sw: Sweep, from_state: ContactState, to_state: ContactState,
+                rng: np.random.Generator | None = None) -> list[float]:
+    """End parameters where ``sw`` goes from ``from_state`` straight into ``to_state``.
+
+    With ``rng``, the interior samples are drawn: the "middle" of an interval anywhere in
+    it (less the margins), the values between the goal value and each end anywhere in
+    :data:`HALFWAY_RANGE` of the way; the ends and the goal value stay fixed. Without it,
+    the middle and the halfway points."""
     pieces = sw.pieces
     if not pieces or pieces[0].state != from_state:
         return []
@@ -167,7 +178,8 @@ def _end_values(ctx: PlanningContext, sw: Sweep, from_state: ContactState, to_st
         if (b - a) * speed < INSTANT_MM:
             return [b] if last and sw.end is SweepEnd.BLOCKED else [0.5 * (a + b)]
         m = min(MARGIN_MM / speed, (b - a) / 4.0)
-        values = [b - m, 0.5 * (a + b), a + m]
+        mid = 0.5 * (a + b) if rng is None else a + m + float(rng.random()) * (b - a - 2.0 * m)
+        values = [b - m, mid, a + m]
         if last and sw.end is SweepEnd.BLOCKED:
             values.insert(0, b)
         g = _goal_value(ctx, sw.motion, a + m, b - m)
@@ -178,7 +190,8 @@ def _end_values(ctx: PlanningContext, sw: Sweep, from_state: ContactState, to_st
         # beyond the goal (Task 1: the lifting pinch is entered by a pivot about a finger
         # that holds the tipped block alone only past ~69 degrees, the goal being 60).
         for end in (b - m, a + m):
-            v = 0.5 * (g + end)
+            w = 0.5 if rng is None else float(rng.uniform(*HALFWAY_RANGE))
+            v = g + w * (end - g)
             if abs(v - g) * speed >= INSTANT_MM and all(abs(v - u) * speed >= INSTANT_MM for u in values):
                 values.append(v)
         return values
