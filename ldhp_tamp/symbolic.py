@@ -45,15 +45,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import unified_planning.environment as up_environment
 import unified_planning.model as up_model
 from unified_planning.environment import Environment, get_environment
 from unified_planning.io import PDDLReader, PDDLWriter
 
 if TYPE_CHECKING:  # unified_planning.engines imports every installed engine (ConfigSpace, scipy)
-    from unified_planning.engines import PlanGenerationResult
+    from unified_planning.engines import Factory, PlanGenerationResult
 
 from geometry.features import ContactState
-from ldhp_tamp import budget
+from ldhp_tamp import budget, engine_names
 from ldhp_tamp.errors import DomainError, EngineError, TimeBudgetExceeded
 from ldhp_tamp.primitives.registry import (
     ActionInfo,
@@ -104,12 +105,51 @@ _TOTAL_COST = "total-cost"
 _SOLVE_LOCK = threading.Lock()
 
 
+class _Environment(Environment):
+    """unified-planning's :class:`Environment`, its engine factory made when first used.
+
+    ``Environment.__init__`` makes the factory, which imports every installed engine and
+    with them ConfigSpace and scipy.stats (0.8 s), though reading a domain and building
+    problems never use it: ``ldhp-tamp check`` does not, and a solve makes it when it
+    loads (:func:`load_checked_domain`). The attributes are those ``Environment.__init__``
+    sets (unified-planning 1.3); ``tests/ldhp_tamp/test_symbolic.py`` checks that they agree.
+    """
+
+    def __init__(self) -> None:  # Environment.__init__, but the factory
+        import unified_planning.model.walkers as walkers
+        from unified_planning.model.type_manager import TypeManager
+
+        self._type_manager = TypeManager()
+        self._factory = None
+        self._tc = walkers.TypeChecker(self)
+        self._expression_manager = up_model.ExpressionManager(self)
+        self._free_vars_oracle = up_model.FreeVarsOracle()
+        self._simplifier = walkers.Simplifier(self)
+        self._substituter = walkers.Substituter(self)
+        self._free_vars_extractor = walkers.FreeVarsExtractor()
+        self._names_extractor = walkers.NamesExtractor()
+        self._credits_stream = None
+        self._error_used_name = True
+
+    @property
+    def factory(self) -> Factory:
+        if self._factory is None:
+            from unified_planning.engines import Factory
+
+            self._factory = Factory(self)
+        return self._factory
+
+
 def _environment() -> Environment:
     """unified-planning's global environment, credits banner off.
 
     The global one, not a private ``Environment()``: up-fast-downward builds expressions
     in the global environment, so ``fast-downward-opt`` fails on problems of any other.
+    When none exists yet it is made here, as an :class:`_Environment`, whose engines are
+    imported only when one is looked up.
     """
+    if up_environment.GLOBAL_ENVIRONMENT is None:
+        up_environment.GLOBAL_ENVIRONMENT = _Environment()
     env = get_environment()
     env.credits_stream = None
     return env
@@ -137,11 +177,18 @@ def available_engines() -> tuple[str, ...]:
 def check_engine(domain: SymbolicDomain, engine: str) -> None:
     """Refuse an unknown engine, or one that does not support the domain's features.
 
+    An engine whose supported kind is recorded (:func:`ldhp_tamp.engine_names.recorded_kind`)
+    is accepted without importing the engines; any other, and every refusal, is decided
+    by the engines themselves, so the messages name every installed engine.
+
     Raises
     ------
     EngineError
         Naming the installed engines, or those that support the domain.
     """
+    recorded = engine_names.recorded_kind(engine)
+    if recorded is not None and domain.kind <= up_model.ProblemKind(recorded.features, recorded.version):
+        return
     installed = available_engines()
     if engine not in installed:
         raise EngineError(f"unknown planning engine {engine!r} for domain {domain.info.source}; "
@@ -211,7 +258,7 @@ def load_domain(domain: str | Path, base: Path | None = None) -> SymbolicDomain:
 
 
 def load_checked_domain(domain: str | Path, engine: str, registry: PrimitiveRegistry,
-                        base: Path | None = None) -> SymbolicDomain:
+                        base: Path | None = None, *, load_engine: bool = True) -> SymbolicDomain:
     """Load a domain and run every check a solve makes before searching.
 
     The one place those checks are made, so that ``ldhp-tamp check`` refuses exactly what
@@ -232,6 +279,11 @@ def load_checked_domain(domain: str | Path, engine: str, registry: PrimitiveRegi
         The unified-planning engine the solve will use.
     registry
         The primitive registry, normally :data:`ldhp_tamp.primitives.REGISTRY`.
+    load_engine
+        Import the engines now (unified-planning's engine factory, 0.8 s), so that a
+        solve pays for them while loading rather than in its first engine call. ``ldhp-tamp
+        check`` passes ``False``: the checks themselves need no engine whose supported
+        kind is recorded (:func:`check_engine`).
 
     Raises
     ------
@@ -244,6 +296,8 @@ def load_checked_domain(domain: str | Path, engine: str, registry: PrimitiveRegi
     loaded = load_domain(domain, base)
     check_against_domain(loaded.info, registry)
     check_engine(loaded, engine)
+    if load_engine:
+        _environment().factory.engine(engine)
     return loaded
 
 

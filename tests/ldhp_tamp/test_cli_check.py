@@ -162,3 +162,46 @@ def test_validate_ignores_an_unknown_key_without_strict(tmp_path: Path, capsys: 
     plan = REPO / "tests" / "data" / "spec" / "pick-plan.json"
     assert main(["validate", str(plan), "--scenario", str(extended)]) == EXIT_OK
     assert "\nvalid: " in capsys.readouterr().out  # after the warning that the sha256 differs
+
+
+# --------------------------------------------------------------------------- the engines are not imported
+
+#: ``close`` changes (at ?s) here, so the domain makes it a MoveObject action; its implementation
+#: is registered as an AdjustGrasp one.
+MISFILED_CLOSE = """(define (domain misfiled-close)
+  (:requirements :strips :typing)
+  (:types state)
+  (:predicates (at ?s - state) (touching) (hand-free) (can-close ?from ?to - state))
+  (:action close
+    :parameters (?from ?to - state)
+    :precondition (and (at ?from) (touching) (can-close ?from ?to))
+    :effect (and (not (at ?from)) (at ?to))))
+"""
+
+
+def test_check_refuses_an_implementation_registered_in_another_family(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    domain = tmp_path / "misfiled-close.pddl"
+    domain.write_text(MISFILED_CLOSE)
+    scenario = _pick_with_domain(tmp_path, domain)
+    assert main(["check", str(scenario)]) == EXIT_BAD_INPUT
+    check_out, check_err = capsys.readouterr()
+    assert check_out == ""
+    _one_line_error(check_err, scenario)
+    assert (f"{domain}: action 'close' is move-object in the domain (it changes (at ?s)) but its implementation "
+            "is registered as adjust-grasp") in check_err
+    assert main(["solve", str(scenario), "--out", str(tmp_path / "plan.json"), "-q"]) == EXIT_BAD_INPUT
+    assert check_err == capsys.readouterr().err.replace("error: ", f"error: {scenario}: ", 1)
+
+
+def test_check_imports_no_engine() -> None:
+    """Every check is made without unified-planning's engines (ConfigSpace, scipy.stats: 0.8 s of
+    imports): their supported kinds are recorded in ldhp_tamp.engine_names."""
+    scenario = resources.scenarios_dir() / "task1_zero_mobility_lift.toml"
+    code = ("import sys; from ldhp_tamp.cli import main; status = main(['check', sys.argv[1]]); "
+            "print(sorted({m.split('.')[0] for m in sys.modules if m.startswith(('unified_planning.engines', "
+            "'ConfigSpace', 'scipy', 'up_pyperplan', 'up_fast_downward'))}), status)")
+    run = subprocess.run([sys.executable, "-c", code, str(scenario)], capture_output=True, text=True, timeout=120,
+                         check=True)
+    assert run.stdout.splitlines()[0].startswith("scenario task1-zero-mobility-lift")
+    assert run.stdout.splitlines()[-1] == "[] 0"

@@ -549,3 +549,64 @@ def test_load_checked_domain_makes_every_check_solve_makes_before_searching() ->
         load_checked_domain(DATA / "costs.pddl", "pyperplan", REGISTRY)
     with pytest.raises(EngineError, match="unknown planning engine 'no-such-engine'"):
         load_checked_domain("ldhp", "no-such-engine", REGISTRY)
+
+
+# --------------------------------------------------------------------------- engines imported only when used
+
+
+def test_the_lazy_environment_has_what_unified_plannings_has() -> None:
+    from unified_planning.environment import Environment
+
+    from ldhp_tamp.symbolic import _Environment
+
+    theirs, ours = Environment(), _Environment()
+    assert ours._factory is None
+    assert ours.factory is ours.factory  # made once, on first use
+    assert {k: type(v) for k, v in vars(ours).items() if k != "_credits_stream"} == \
+           {k: type(v) for k, v in vars(theirs).items() if k != "_credits_stream"}
+    assert ours.credits_stream is None
+
+
+@pytest.mark.parametrize("engine", ["pyperplan", "pyperplan-opt", "fast-downward", "fast-downward-opt"])
+def test_check_engine_decides_as_the_engines_do(engine: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The recorded supported kinds accept exactly what the engines accept."""
+    from ldhp_tamp import engine_names
+    from ldhp_tamp.symbolic import check_engine
+
+    if engine not in available_engines():
+        pytest.skip(f"{engine} is not installed")
+    domains = [load_domain(p) for p in [*SHIPPED, DATA / "costs.pddl", DATA / "no-air-move.pddl"]]
+
+    def verdicts() -> list[str]:
+        out = []
+        for domain in domains:
+            try:
+                check_engine(domain, engine)
+                out.append("accepted")
+            except EngineError as exc:
+                out.append(str(exc))
+        return out
+
+    recorded = verdicts()
+    monkeypatch.setattr(engine_names, "recorded_kind", lambda name: None)  # ask the engines
+    assert recorded == verdicts()
+    assert "accepted" in recorded
+
+
+_IMPORTS = ("import sys; from ldhp_tamp.primitives import REGISTRY; from ldhp_tamp.symbolic import load_checked_domain; "
+            "load_checked_domain('ldhp', 'pyperplan', REGISTRY, load_engine={}); "
+            "print(sorted({{m.split('.')[0] for m in sys.modules if m.startswith(('unified_planning.engines', "
+            "'ConfigSpace', 'scipy', 'up_pyperplan'))}}))")
+
+
+def test_the_checks_before_a_search_import_no_engine_and_a_solve_imports_them_while_loading() -> None:
+    import subprocess
+    import sys
+
+    def imported(load_engine: bool) -> str:
+        run = subprocess.run([sys.executable, "-c", _IMPORTS.format(load_engine)], capture_output=True, text=True,
+                             timeout=120, check=True, cwd=ROOT)
+        return run.stdout.strip()
+
+    assert imported(False) == "[]"
+    assert imported(True) == "['ConfigSpace', 'scipy', 'unified_planning', 'up_pyperplan']"
