@@ -12,28 +12,38 @@ ablation. Data flows through plain functions over small values::
     path = write_domain_without("ldhp", {"tip"}, tmp)    # the same, as a checked file
     table = ablate(["scenarios/example_pick.toml"], AblationOptions(jobs=2))
     print(format_table(table))                           # Table III, Markdown
-    write_csv(table, "ablation.csv")                     # removed,scenario,feasible,reason,time_s
+    write_csv(table, "ablation.csv")                     # removed,scenario,feasible,reason,...
 
 A cell is feasible (``Y``) when the solve returns a plan that the validator accepts and
 that uses only the actions of the ablated domain; anything else (no plan, a time limit,
 an error) is ``N``, with the status and the reason kept in the cell.
+
+Solves at once. With ``jobs`` 1 and the ``local`` executor the cells are solved in this
+process, one after the other. Otherwise each cell is a process of its own through
+:func:`ldhp_tamp.sweep.run_cells` (``local``: at most ``jobs`` forked processes;
+``dask``: one Dask task per cell, on a ``LocalCluster`` or a ``scheduler``), under the hard
+limit ``timeout_s + grace_s``: a cell whose process crashes is an ``error`` cell, one past
+the limit a ``timeout`` cell, and the others go on.
+
+Resuming. With ``csv``, :func:`ablate` rewrites that file as each cell ends; with
+``resume`` it first reads the file and solves again only the cells it lacks or holds
+with the status ``error`` (a crash says nothing about the primitive).
 """
 
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import csv
+import dataclasses
 import io
 import logging
 import math
-import multiprocessing
 import os
 import re
 import tempfile
 import time
 import traceback
-from collections.abc import Callable, Collection, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -41,6 +51,7 @@ from typing import TYPE_CHECKING
 from ldhp_tamp.errors import DomainError, InputError
 from ldhp_tamp.files import write_text_atomic
 from ldhp_tamp.primitives.registry import Family
+from ldhp_tamp.sweep import CellFailure, CellTask, SweepOptions, check_executor, run_cells
 
 if TYPE_CHECKING:
     from ldhp_tamp.scenario import Scenario
@@ -58,6 +69,7 @@ __all__ = [
     "format_sexpr",
     "format_table",
     "parse_sexprs",
+    "read_csv",
     "write_csv",
     "write_domain_without",
 ]
@@ -68,8 +80,12 @@ log = logging.getLogger(__name__)
 BASELINE = "none"
 
 #: The columns of the CSV, in order: the table's three first, then why a cell is not
-#: feasible (the solve's one-line reason; empty when feasible) and the solve's wall time.
-CSV_COLUMNS: tuple[str, ...] = ("removed", "scenario", "feasible", "reason", "time_s")
+#: feasible (the solve's one-line reason; empty when feasible), the solve's wall time,
+#: the cell's status and the plan's primitives (space-separated; empty when not feasible).
+CSV_COLUMNS: tuple[str, ...] = ("removed", "scenario", "feasible", "reason", "time_s", "status", "primitives")
+
+#: The statuses a resumed ablation keeps; an ``error`` cell is solved again.
+FINAL_STATUSES = frozenset({"solved", "failed", "invalid", "timeout"})
 
 #: An s-expression: an atom, or a list of s-expressions.
 SExpr = str | list["SExpr"]
@@ -92,11 +108,18 @@ class AblationOptions:
     timeout_s
         Seconds per solve, passed as ``SolveOptions(timeout=...)`` when the planner has
         that option (otherwise ignored, with a warning).
+    grace_s
+        Seconds added to ``timeout_s`` for the hard limit of a cell run in a process of
+        its own (its process group is then terminated: a ``timeout`` cell).
     jobs
-        Solves at once, each in a worker process; 1 solves in this process.
+        Solves at once, each in a process of its own; 1 with the ``local`` executor
+        solves in this process.
     keep_domains
         Write the domain copies into this directory and keep them; ``None``: a temporary
         directory, removed at the end.
+    executor, scheduler
+        ``local`` or ``dask``, and the ``dask`` scheduler's address (``tcp://HOST:PORT``;
+        ``None``: a ``LocalCluster`` of ``jobs`` workers): :mod:`ldhp_tamp.sweep`.
 
     Raises
     ------
@@ -109,8 +132,12 @@ class AblationOptions:
     timeout_s: float | None = None
     jobs: int = 1
     keep_domains: Path | None = None
+    grace_s: float = 10.0
+    executor: str = "local"
+    scheduler: str | None = None
 
     def __post_init__(self) -> None:
+        check_executor(self.executor, self.scheduler)
         if self.remove is not None:
             object.__setattr__(self, "remove", tuple(dict.fromkeys(a.lower() for a in self.remove)))
             if not self.remove:
@@ -119,6 +146,13 @@ class AblationOptions:
             raise InputError(f"--jobs: need at least 1 worker, got {self.jobs}")
         if self.timeout_s is not None and not (math.isfinite(self.timeout_s) and self.timeout_s > 0):
             raise InputError(f"--timeout: must be a positive number of seconds, got {self.timeout_s}")
+        if not (math.isfinite(self.grace_s) and self.grace_s >= 0):
+            raise InputError(f"--grace: must be >= 0 seconds, got {self.grace_s}")
+
+    @property
+    def hard_limit_s(self) -> float | None:
+        """The limit of a cell in a process of its own: ``timeout_s + grace_s``, or none."""
+        return None if self.timeout_s is None else self.timeout_s + self.grace_s
 
 
 @dataclass(frozen=True)
@@ -420,6 +454,21 @@ def _solve_job(job: _Job) -> AblationCell:
                             f"{type(exc).__name__}: {exc}{where}", time.perf_counter() - start)
 
 
+def _failed_cell(job: _Job, failure: CellFailure, reason: str, wall_s: float) -> AblationCell:
+    """The cell of a solve whose process died (``error``) or passed the hard limit
+    (``timeout``)."""
+    return AblationCell(job.removed, job.scenario, job.scenario_file, False, failure.value, reason, wall_s)
+
+
+def _with_wall(cell: AblationCell, wall_s: float) -> AblationCell:
+    return dataclasses.replace(cell, time_s=wall_s)
+
+
+#: How :func:`ldhp_tamp.sweep.run_cells` solves a cell.
+_TASK: CellTask[_Job, AblationCell] = CellTask(run=_solve_job, failed=_failed_cell,
+                                               preload=("ldhp_tamp.ablate", "ldhp_tamp.tamp"), name="ablate")
+
+
 def _solve(job: _Job, start: float) -> AblationCell:
     from ldhp_tamp.bench import solver_has_timeout
     from ldhp_tamp.scenario import load_scenario
@@ -456,47 +505,19 @@ def _solve(job: _Job, start: float) -> AblationCell:
     return cell(True, result.status.value, "", used)
 
 
-def _context() -> multiprocessing.context.BaseContext:
-    """A forkserver that has imported the planner (a worker then starts without import
-    time); ``spawn`` where there is no forkserver. Never plain ``fork``: the parent may
-    hold threads and locks."""
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["ldhp_tamp.ablate", "ldhp_tamp.tamp"])
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
-def _run(jobs: Sequence[_Job], workers: int, on_cell: Callable[[int, AblationCell], None]
+def _run(jobs: Sequence[_Job], options: AblationOptions, on_cell: Callable[[AblationCell], None]
          ) -> list[AblationCell]:
-    """Solve every job, in this process (``workers`` 1) or in a process pool; cells in
-    the order of ``jobs``."""
-    cells: list[AblationCell | None] = [None] * len(jobs)
-    done = 0
-    if workers == 1 or len(jobs) == 1:
-        for i, job in enumerate(jobs):
-            cells[i] = _solve_job(job)
-            done += 1
-            on_cell(done, cells[i])  # type: ignore[arg-type]
-    else:
-        pool = concurrent.futures.ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
-                                                      mp_context=_context())
-        try:
-            futures = {pool.submit(_solve_job, job): i for i, job in enumerate(jobs)}
-            for future in concurrent.futures.as_completed(futures):
-                i = futures[future]
-                try:
-                    cell = future.result()
-                except Exception as exc:  # the worker process died (BrokenProcessPool, ...)
-                    job = jobs[i]
-                    cell = AblationCell(job.removed, job.scenario, job.scenario_file, False, "error",
-                                        f"the worker process failed: {type(exc).__name__}: {exc}", 0.0)
-                cells[i] = cell
-                done += 1
-                on_cell(done, cell)
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
-    return [c for c in cells if c is not None]
+    """Solve every job, in this process (``jobs`` 1, ``local``) or each in a process of its
+    own (:func:`ldhp_tamp.sweep.run_cells`); cells in the order of ``jobs``."""
+    if options.executor == "local" and (options.jobs == 1 or len(jobs) == 1):
+        cells = []
+        for job in jobs:
+            cells.append(_solve_job(job))
+            on_cell(cells[-1])
+        return cells
+    sweep = SweepOptions(executor=options.executor, jobs=min(options.jobs, len(jobs)),
+                         scheduler=options.scheduler, hard_limit_s=options.hard_limit_s)
+    return run_cells(jobs, _TASK, sweep, lambda _position, cell: on_cell(cell))
 
 
 def _common_domain(scenarios: Sequence[tuple[Path, Scenario]]) -> Path:
@@ -509,7 +530,8 @@ def _common_domain(scenarios: Sequence[tuple[Path, Scenario]]) -> Path:
 
 
 def ablate(scenarios: Sequence[str | os.PathLike[str]], options: AblationOptions = AblationOptions(),
-           progress: Callable[[str], None] | None = None) -> AblationTable:
+           progress: Callable[[str], None] | None = None, csv_path: str | os.PathLike[str] | None = None,
+           resume: bool = False) -> AblationTable:
     """Remove one action of the domain at a time and solve every scenario without it.
 
     Every scenario is loaded and every domain copy written and checked (it loads, the
@@ -523,6 +545,12 @@ def ablate(scenarios: Sequence[str | os.PathLike[str]], options: AblationOptions
         See :class:`AblationOptions`.
     progress
         Called with one line per finished solve (and a few more).
+    csv_path
+        Write the table as CSV (:func:`format_csv`) here, rewritten as each cell ends:
+        an interrupted ablation keeps the cells it solved.
+    resume
+        With ``csv_path``: keep the cells of an existing ``csv_path`` (:func:`read_csv`)
+        whose status is final (not ``error``) and solve only the others.
 
     Returns
     -------
@@ -533,7 +561,11 @@ def ablate(scenarios: Sequence[str | os.PathLike[str]], options: AblationOptions
     ------
     InputError
         A scenario that cannot be loaded, two scenarios with the same name, an unknown
-        domain or action, scenarios with different domains and no ``options.domain``.
+        domain or action, scenarios with different domains and no ``options.domain``, a
+        ``csv_path`` to resume from that is not such a CSV (:func:`read_csv`).
+    ExecutorError
+        ``dask`` without the ``distributed`` package, or a scheduler that cannot be
+        reached.
     """
     from ldhp_tamp import symbolic
     from ldhp_tamp.primitives import REGISTRY, check_against_domain
@@ -582,16 +614,33 @@ def ablate(scenarios: Sequence[str | os.PathLike[str]], options: AblationOptions
             copies[removed] = (path, ablated.names())
         jobs = [_Job(removed, sc.name, str(p), str(copies[removed][0]), copies[removed][1], options.timeout_s)
                 for removed in copies for p, sc in loaded]
+        by_key: dict[tuple[str, str], AblationCell] = {}
+        if csv_path is not None and resume and Path(csv_path).exists():
+            wanted = {(j.removed, j.scenario): j for j in jobs}
+            for kept in read_csv(csv_path):
+                job = wanted.get((kept.removed, kept.scenario))
+                if job is not None and kept.status in FINAL_STATUSES:
+                    by_key[(kept.removed, kept.scenario)] = dataclasses.replace(kept, scenario_file=job.scenario_file)
+        todo = [j for j in jobs if (j.removed, j.scenario) not in by_key]
+        resumed = f" ({len(by_key)} already in {csv_path}, {len(todo)} to solve)" if by_key else ""
         say(f"{len(copies)} domains ({source.name} and one without each of {len(order)} action(s)) x "
-            f"{len(loaded)} scenario(s): {len(jobs)} solves, {options.jobs} at a time")
+            f"{len(loaded)} scenario(s): {len(jobs)} solves{resumed}, {options.jobs} at a time")
 
-        def on_cell(done: int, cell: AblationCell) -> None:
+        def write(final: bool = False) -> None:
+            if csv_path is not None and (todo or final):
+                _write_cells(csv_path, [by_key[k] for j in jobs if (k := (j.removed, j.scenario)) in by_key])
+
+        def on_cell(cell: AblationCell) -> None:
+            by_key[(cell.removed, cell.scenario)] = cell
             label = "baseline" if cell.removed == BASELINE else f"without {cell.removed}"
             how = cell.status if cell.status in ("solved", "failed") else f"{cell.status}: {cell.reason}"
-            say(f"[{done}/{len(jobs)}] {label}, {cell.scenario}: {cell.mark} ({how}, {cell.time_s:.1f} s)")
+            say(f"[{len(by_key) - len(jobs) + len(todo)}/{len(todo)}] {label}, {cell.scenario}: {cell.mark} "
+                f"({how}, {cell.time_s:.1f} s)")
+            write()
 
-        cells = _run(jobs, options.jobs, on_cell)
-    by_key = {(c.removed, c.scenario): c for c in cells}
+        if todo:
+            _run(todo, options, on_cell)
+        write(final=True)
     rows = tuple(AblationRow(removed, None if removed == BASELINE else info.action(removed).family,
                              tuple(by_key[(removed, name)] for name in names))
                  for removed in copies)
@@ -653,22 +702,65 @@ def format_table(table: AblationTable) -> str:
 
 def format_csv(table: AblationTable) -> str:
     """The table as CSV with the columns :data:`CSV_COLUMNS`,
-    ``removed,scenario,feasible,reason,time_s`` (``feasible`` is ``Y`` or ``N``; the
-    baseline's ``removed`` is :data:`BASELINE`; ``reason`` is empty for a feasible cell
-    and on one line; ``time_s`` the solve's wall time in seconds, 3 decimals)."""
+    ``removed,scenario,feasible,reason,time_s,status,primitives`` (``feasible`` is ``Y``
+    or ``N``; the baseline's ``removed`` is :data:`BASELINE`; ``reason`` is empty for a
+    feasible cell and on one line; ``time_s`` the solve's wall time in seconds, 3
+    decimals; ``status`` the cell's; ``primitives`` the plan's steps, space-separated)."""
+    return _csv_text(cell for row in table.rows for cell in row.cells)
+
+
+def _csv_text(cells: Iterable[AblationCell]) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(CSV_COLUMNS)
-    for row in table.rows:
-        for cell in row.cells:
-            reason = "" if cell.feasible else " ".join(cell.reason.split())
-            writer.writerow([row.removed, cell.scenario, cell.mark, reason, f"{cell.time_s:.3f}"])
+    for cell in cells:
+        reason = "" if cell.feasible else " ".join(cell.reason.split())
+        writer.writerow([cell.removed, cell.scenario, cell.mark, reason, f"{cell.time_s:.3f}", cell.status,
+                         " ".join(cell.primitives)])
     return buf.getvalue()
+
+
+def _write_cells(path: str | os.PathLike[str], cells: Iterable[AblationCell]) -> Path:
+    try:
+        return write_text_atomic(path, _csv_text(cells))
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the CSV: {exc.strerror or exc}") from None
+
+
+def read_csv(path: str | os.PathLike[str]) -> tuple[AblationCell, ...]:
+    """The cells of a CSV that :func:`format_csv` (or a running :func:`ablate`) wrote, in
+    its order; ``scenario_file`` is empty (the CSV does not hold it).
+
+    Raises
+    ------
+    InputError
+        A file that cannot be read, or that is not such a CSV (other columns, a bad
+        value): the message names the file and the line.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the ablation CSV: {exc}") from None
+    reader = csv.reader(io.StringIO(text))
+    header = tuple(next(reader, ()))
+    if header != CSV_COLUMNS:
+        raise InputError(f"{path}: not an ablation CSV of this version: its columns are "
+                         f"{','.join(header) or 'missing'}, expected {','.join(CSV_COLUMNS)}")
+    cells = []
+    for line, values in enumerate(reader, start=2):
+        if len(values) != len(CSV_COLUMNS) or values[2] not in ("Y", "N"):
+            raise InputError(f"{path}:{line}: expected {len(CSV_COLUMNS)} values with feasible Y or N, "
+                             f"got {values}")
+        removed, scenario, mark, reason, time_s, status, primitives = values
+        try:
+            seconds = float(time_s)
+        except ValueError:
+            raise InputError(f"{path}:{line}: time_s: not a number: {time_s!r}") from None
+        cells.append(AblationCell(removed, scenario, "", mark == "Y", status, reason, seconds,
+                                  tuple(primitives.split())))
+    return tuple(cells)
 
 
 def write_csv(table: AblationTable, path: str | os.PathLike[str]) -> Path:
     """Write :func:`format_csv` to ``path`` atomically."""
-    try:
-        return write_text_atomic(path, format_csv(table))
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write the CSV: {exc.strerror or exc}") from None
+    return _write_cells(path, (cell for row in table.rows for cell in row.cells))

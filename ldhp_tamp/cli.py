@@ -241,26 +241,39 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _add_executor(p: argparse.ArgumentParser) -> None:
+    """``--executor`` and ``--scheduler`` of bench and ablate (:mod:`ldhp_tamp.sweep`)."""
+    from ldhp_tamp.sweep import EXECUTORS
+
+    p.add_argument("--executor", choices=EXECUTORS, default="local",
+                   help="where the cells run: 'local' processes (default) or 'dask' (one task per cell; "
+                        "needs pip install 'ldhp-tamp[dask]'); see docs/benchmarks.md")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="with --executor dask: a running Dask scheduler (default: a LocalCluster of --jobs "
+                        "workers on this machine)")
+
+
 def cmd_ablate(args: argparse.Namespace) -> int:
     """Remove one primitive at a time from a copy of the domain, solve every scenario with
     it; print Table III (Y/N), optionally write the CSV. Exit 0 when the ablation ran,
     whatever the cells say."""
     from pathlib import Path
 
-    from ldhp_tamp.ablate import AblationOptions, ablate, format_table, write_csv
+    from ldhp_tamp.ablate import AblationOptions, ablate, format_table
 
     options = AblationOptions(domain=args.domain, remove=args.remove, timeout_s=args.timeout,
-                              jobs=args.jobs, keep_domains=Path(args.keep_domains) if args.keep_domains else None)
+                              jobs=args.jobs, keep_domains=Path(args.keep_domains) if args.keep_domains else None,
+                              grace_s=args.grace, executor=args.executor, scheduler=args.scheduler)
     quiet = args.quiet
 
     def progress(msg: str) -> None:
         if not quiet:
             print(f"[ldhp-tamp ablate] {msg}", file=sys.stderr, flush=True)
 
-    table = ablate(args.scenarios, options, progress=progress)
+    table = ablate(args.scenarios, options, progress=progress, csv_path=args.csv, resume=not args.fresh)
     print(format_table(table), end="")
     if args.csv:
-        print(f"wrote {write_csv(table, args.csv)}")
+        print(f"wrote {args.csv}")
     return EXIT_OK
 
 
@@ -432,10 +445,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="domain to ablate: a name in domains/ or a .pddl file (default: the scenarios' own)")
     p.add_argument("--remove", type=_comma_names, metavar="A,B",
                    help="remove only these actions, one at a time (default: every action of the domain)")
-    p.add_argument("--csv", metavar="FILE", help="also write the table as CSV: removed,scenario,feasible,reason,time_s")
+    p.add_argument("--csv", metavar="FILE",
+                   help="also write the table as CSV (removed,scenario,feasible,reason,time_s,status,primitives), "
+                        "rewritten as each solve ends; an existing FILE is resumed: its cells are not solved "
+                        "again, but for 'error' ones")
+    p.add_argument("--fresh", action="store_true", help="solve every cell, ignoring what --csv FILE holds")
     p.add_argument("--timeout", type=float, metavar="S",
-                   help="seconds per solve, if the planner has a timeout option (else ignored, with a warning)")
-    p.add_argument("--jobs", type=int, default=1, metavar="J", help="solves at once, in worker processes (default 1)")
+                   help="seconds per solve, if the planner has a timeout option (else ignored, with a warning); "
+                        "a solve in a process of its own is stopped at S + --grace (status 'timeout')")
+    p.add_argument("--grace", type=float, default=10.0, metavar="S",
+                   help="seconds added to --timeout for the hard limit (default 10)")
+    p.add_argument("--jobs", type=int, default=1, metavar="J",
+                   help="solves at once, each in a process of its own (default 1: in this process)")
+    _add_executor(p)
     p.add_argument("--keep-domains", metavar="DIR", help="write the domain copies here and keep them")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
 

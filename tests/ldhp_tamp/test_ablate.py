@@ -158,7 +158,8 @@ def test_table_and_csv(pick_table: AblationTable, tmp_path: Path) -> None:
     assert lines.index("| none (baseline) | Y |") < lines.index("| *MoveObject* | |") \
         < lines.index("| air-move | N |") < lines.index("| *AdjustGrasp* | |") < lines.index("| slide | Y |")
     rows = list(csv.reader(io.StringIO(format_csv(pick_table))))
-    assert tuple(rows[0]) == CSV_COLUMNS == ("removed", "scenario", "feasible", "reason", "time_s")
+    assert tuple(rows[0]) == CSV_COLUMNS == ("removed", "scenario", "feasible", "reason", "time_s", "status",
+                                             "primitives")
     assert [r[:3] for r in rows[1:]] == [["none", "example-pick", "Y"], ["air-move", "example-pick", "N"],
                                          ["slide", "example-pick", "Y"]]
     # why a cell is not feasible, on one line (the solve's headline); empty when it is
@@ -167,6 +168,9 @@ def test_table_and_csv(pick_table: AblationTable, tmp_path: Path) -> None:
     assert reasons[1] == " ".join(pick_table.rows[1].cells[0].reason.split())
     # the wall time of each solve, in seconds
     assert all(float(r[4]) > 0 and len(r[4].split(".")[1]) == 3 for r in rows[1:])
+    # the status and the plan's primitives
+    assert [r[5] for r in rows[1:]] == ["solved", "failed", "solved"]
+    assert rows[1][6] == "approach-contact air-move" and rows[2][6] == ""
 
 
 def test_plan_with_a_primitive_the_domain_lacks_is_refused() -> None:
@@ -188,7 +192,7 @@ def test_cli_ablate_in_worker_processes(tmp_path: Path, capsys: pytest.CaptureFi
     assert f"wrote {out}" in stdout
     assert "[2/2]" in stderr and "Traceback" not in stderr
     rows = list(csv.reader(io.StringIO(out.read_text())))
-    assert rows[0] == ["removed", "scenario", "feasible", "reason", "time_s"]
+    assert rows[0] == ["removed", "scenario", "feasible", "reason", "time_s", "status", "primitives"]
     assert [r[:3] for r in rows[1:]] == [["none", "example-pick", "Y"], ["approach-contact", "example-pick", "N"]]
     assert rows[1][3] == "" and rows[2][3] and all(float(r[4]) > 0 for r in rows[1:])
     assert sorted(p.name for p in keep.iterdir()) == ["ldhp-baseline.pddl", "ldhp-without-approach-contact.pddl"]
