@@ -1,7 +1,10 @@
 """The benchmark harness: ``ldhp-tamp bench``.
 
-Every combination scenario x engine x K (samples per edge) x seed is one *run*: one
-:func:`ldhp_tamp.tamp.solve` in a worker process of its own. Data flows through plain
+Every combination scenario x planner x engine x K (samples per edge) x seed is one *run*:
+one call of the planner (:mod:`ldhp_tamp.planners`; ``ldhp`` is :func:`ldhp_tamp.tamp.solve`)
+in a worker process of its own. Every planner's plan is judged the same way: the
+validator decides ``solved`` for an external planner (``cmd:``), and every solved plan is
+replayed in the physics simulation (``executes``) and measured (:mod:`ldhp_tamp.metrics`). Data flows through plain
 functions over small values::
 
     runs = plan_runs(["scenarios/example_pick.toml"], BenchOptions(seeds=2, jobs=2))
@@ -75,7 +78,9 @@ __all__ = [
     "run_all",
     "run_bench",
     "solve_run",
+    "quartiles",
     "solver_has_timeout",
+    "wilson_interval",
     "write_results",
 ]
 
@@ -111,6 +116,8 @@ class BenchOptions:
     """
 
     engines: tuple[str, ...] | None = None
+    planners: tuple[str, ...] = ("ldhp",)
+    """Planner names (:func:`ldhp_tamp.planners.get_planner`), checked by :func:`plan_runs`."""
     seeds: int = 1
     samples: tuple[int, ...] | None = None
     timeout_s: float | None = None
@@ -125,6 +132,9 @@ class BenchOptions:
             object.__setattr__(self, "engines", tuple(self.engines))
             if not self.engines:
                 raise InputError("--engines: give at least one engine")
+        object.__setattr__(self, "planners", tuple(self.planners))
+        if not self.planners:
+            raise InputError("--planners: give at least one planner")
         if self.samples is not None:
             object.__setattr__(self, "samples", tuple(self.samples))
             if not self.samples or any(isinstance(k, bool) or not isinstance(k, int) or k < 1
@@ -164,13 +174,16 @@ class RunSpec:
     timeout_s: float | None = None
     plan_file: str | None = None
     simulate: bool = True
+    planner: str = "ldhp"
 
 
 @dataclass(frozen=True)
 class BenchRow:
     """One run's outcome: a row of ``runs.csv`` and of ``runs.json``'s ``rows``.
 
-    Counts and times are ``None`` when the run produced no plan (``timeout``, ``error``).
+    Counts and times are ``None`` when the run produced no plan (``timeout``, ``error``);
+    the plan's measures (:mod:`ldhp_tamp.metrics`: ``regrasps``, ``finger_travel_mm``,
+    ``object_path_mm``, ``object_rotation_rad``, ``support_margin``) only for solved runs.
     """
 
     scenario: str
@@ -200,16 +213,29 @@ class BenchRow:
     simulated)."""
     diverges_at: int | None = None
     sim_wall_s: float | None = None
+    planner: str = "ldhp"
+    regrasps: int | None = None
+    finger_travel_mm: float | None = None
+    object_path_mm: float | None = None
+    object_rotation_rad: float | None = None
+    support_margin: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values, in column order (the status as its string)."""
         d = dataclasses.asdict(self)
         d["status"] = self.status.value
-        return d
+        return {c: d[c] for c in COLUMNS}
 
 
-#: The CSV header, in column order.
-COLUMNS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(BenchRow))
+def _columns() -> tuple[str, ...]:
+    names = [f.name for f in dataclasses.fields(BenchRow)]
+    names.remove("planner")
+    names.insert(names.index("scenario_file") + 1, "planner")
+    return tuple(names)
+
+
+#: The CSV header, in column order (``planner`` after ``scenario_file``).
+COLUMNS: tuple[str, ...] = _columns()
 
 
 @dataclass(frozen=True)
@@ -232,20 +258,26 @@ def solver_has_timeout() -> bool:
 
 
 def plan_runs(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions) -> tuple[RunSpec, ...]:
-    """Load and check every scenario and engine, then list the runs: scenario x engine x
-    K x seed (seeds ``0 .. seeds-1``), in that order.
+    """Load and check every scenario, planner and engine, then list the runs: scenario x
+    planner x engine x K x seed (seeds ``0 .. seeds-1``), in that order. A planner without
+    a symbolic tier (:func:`ldhp_tamp.planners.uses_engine`) runs once per K and seed,
+    with the engine column empty.
 
     Raises
     ------
     InputError
-        A scenario that cannot be loaded (the message names the file), an engine that is
-        not installed (the message lists the installed ones), no scenario at all.
+        A scenario that cannot be loaded (the message names the file), an unknown planner
+        (the message lists the known ones), an engine that is not installed (the message
+        lists the installed ones), no scenario at all.
     """
+    from ldhp_tamp.planners import get_planner, uses_engine
     from ldhp_tamp.scenario import load_scenario
     from ldhp_tamp.symbolic import available_engines
 
     if not scenarios:
         raise InputError("no scenario given")
+    for name in options.planners:
+        get_planner(name)
     loaded = [(Path(p), load_scenario(p)) for p in scenarios]
     installed = available_engines()
     wanted = options.engines or tuple(dict.fromkeys(s.settings.engine for _, s in loaded))
@@ -254,41 +286,44 @@ def plan_runs(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions
         raise EngineError(f"unknown planning engine {unknown[0]!r}; installed: {', '.join(installed)}")
     specs: list[RunSpec] = []
     for path, sc in loaded:
-        engines = options.engines or (sc.settings.engine,)
         ks = options.samples or (sc.settings.samples_per_edge,)
-        for engine in engines:
-            for k in ks:
-                for seed in range(options.seeds):
-                    specs.append(RunSpec(index=len(specs), scenario_file=str(path), scenario=sc.name,
-                                         engine=engine, seed=seed, samples_per_edge=k,
-                                         object_vertices=sc.world.object.n, timeout_s=options.timeout_s,
-                                         simulate=options.simulate))
+        for planner in options.planners:
+            engines = (options.engines or (sc.settings.engine,)) if uses_engine(planner) else ("",)
+            for engine in engines:
+                for k in ks:
+                    for seed in range(options.seeds):
+                        specs.append(RunSpec(index=len(specs), scenario_file=str(path), scenario=sc.name,
+                                             engine=engine, seed=seed, samples_per_edge=k,
+                                             object_vertices=sc.world.object.n, timeout_s=options.timeout_s,
+                                             simulate=options.simulate, planner=planner))
     return tuple(specs)
 
 
 def _row(spec: RunSpec, status: BenchStatus, reason: str, wall_s: float, **counts: Any) -> BenchRow:
-    return BenchRow(scenario=spec.scenario, scenario_file=spec.scenario_file, engine=spec.engine,
+    return BenchRow(scenario=spec.scenario, scenario_file=spec.scenario_file, planner=spec.planner,
+                    engine=spec.engine,
                     seed=spec.seed, samples_per_edge=spec.samples_per_edge,
                     object_vertices=spec.object_vertices, status=status, reason=reason,
                     wall_s=round(wall_s, 4), **counts)
 
 
 def solve_run(spec: RunSpec) -> BenchRow:
-    """Run one solve in this process and describe it as a row; write its plan to
-    ``spec.plan_file`` when that is set.
+    """Run one solve (``spec.planner``) in this process and describe it as a row; write
+    its plan to ``spec.plan_file`` when that is set.
 
-    Raises whatever :func:`ldhp_tamp.tamp.solve` raises (the worker turns it into an
-    ``error`` row).
+    Raises whatever the planner raises (the worker turns it into an ``error`` row).
     """
+    from ldhp_tamp.planners import get_planner
     from ldhp_tamp.scenario import load_scenario
-    from ldhp_tamp.tamp import SolveOptions, solve
+    from ldhp_tamp.tamp import SolveOptions
 
     start = time.perf_counter()
     scenario = load_scenario(spec.scenario_file)
-    knobs: dict[str, Any] = {"engine": spec.engine, "seed": spec.seed, "samples_per_edge": spec.samples_per_edge}
+    knobs: dict[str, Any] = {"engine": spec.engine or None, "seed": spec.seed,
+                             "samples_per_edge": spec.samples_per_edge}
     if spec.timeout_s is not None and solver_has_timeout():
         knobs["timeout"] = spec.timeout_s
-    result = solve(scenario, SolveOptions(**knobs))
+    result = get_planner(spec.planner)(scenario, SolveOptions(**knobs))
     plan = result.plan
     if spec.plan_file is not None:
         from ldhp_tamp.plan import write_plan
@@ -305,7 +340,15 @@ def solve_run(spec: RunSpec) -> BenchRow:
         report = simulate_plan(plan, scenario)
         sim = {"executes": report.executes, "diverges_at": report.diverged_step,
                "sim_wall_s": round(time.perf_counter() - t0, 4)}
-    return _row(spec, status, result.reason or (plan.reason or ""), time.perf_counter() - start, **sim,
+    measures: dict[str, Any] = {}
+    if result.solved:
+        from ldhp_tamp.metrics import plan_metrics
+
+        m = plan_metrics(plan, scenario)
+        measures = {"regrasps": m.regrasps, "finger_travel_mm": m.finger_travel_mm,
+                    "object_path_mm": m.object_path_mm, "object_rotation_rad": m.object_rotation_rad,
+                    "support_margin": m.support_margin}
+    return _row(spec, status, result.reason or (plan.reason or ""), time.perf_counter() - start, **sim, **measures,
                 time_total_s=times.get("total"), time_setup_s=times.get("setup"),
                 time_symbolic_s=times.get("symbolic"), time_streams_s=times.get("streams"),
                 time_grasp_graph_s=times.get("grasp_graph"),
@@ -496,7 +539,8 @@ def format_json(rows: Sequence[BenchRow], options: BenchOptions, created: str | 
     doc = {
         "format": BENCH_FORMAT,
         "created": created or datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "options": {"engines": list(options.engines) if options.engines else None, "seeds": options.seeds,
+        "options": {"planners": list(options.planners),
+                    "engines": list(options.engines) if options.engines else None, "seeds": options.seeds,
                     "samples_per_edge": list(options.samples) if options.samples else None,
                     "timeout_s": options.timeout_s, "grace_s": options.grace_s,
                     "hard_limit_s": options.hard_limit_s, "jobs": options.jobs, "simulate": options.simulate,
@@ -512,50 +556,109 @@ def _num(x: float | None, digits: int = 2) -> str:
     return "-" if x is None else f"{x:.{digits}f}"
 
 
+#: z of the two-sided 95 % interval.
+_Z95 = 1.959963984540054
+
+
+def wilson_interval(successes: int, n: int, z: float = _Z95) -> tuple[float, float]:
+    """The Wilson score interval of a success rate (95 % by default), as fractions.
+
+    >>> lo, hi = wilson_interval(5, 5)
+    >>> round(lo, 3), hi
+    (0.566, 1.0)
+    >>> wilson_interval(0, 0)
+    (0.0, 1.0)
+    """
+    if n <= 0:
+        return 0.0, 1.0
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z / denom * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def quartiles(values: Sequence[float]) -> tuple[float, float, float] | None:
+    """First quartile, median, third quartile (inclusive method), or ``None`` for no value."""
+    if not values:
+        return None
+    if len(values) == 1:
+        return values[0], values[0], values[0]
+    q1, q2, q3 = statistics.quantiles(values, n=4, method="inclusive")
+    return q1, q2, q3
+
+
+def _median(values: Sequence[float | int | None], digits: int = 1) -> str:
+    vals = [v for v in values if v is not None]
+    return _num(statistics.median(vals) if vals else None, digits)
+
+
+def _group_key(r: BenchRow) -> tuple[str, str, str, int]:
+    return (r.scenario, r.planner, r.engine, r.samples_per_edge)
+
+
 def format_summary(rows: Sequence[BenchRow], options: BenchOptions) -> str:
-    """``summary.md``: per scenario, engine and K, the success rate, the median, mean and
-    max solve time and the median plan length over solved runs, the median time per
-    tier, and the reason of every run that was not solved."""
-    groups: dict[tuple[str, str, int], list[BenchRow]] = {}
+    """``summary.md``: per scenario, planner, engine and K, the success rate with its 95 %
+    Wilson interval over the seeds, how many solved plans execute in simulation, the
+    solve time's median and quartiles over solved runs, the median measures of the
+    solved plans (steps, regrasps, finger travel, object path, support margin), the
+    median time per tier, and the reason of every run that was not solved."""
+    groups: dict[tuple[str, str, str, int], list[BenchRow]] = {}
     for r in rows:
-        groups.setdefault((r.scenario, r.engine, r.samples_per_edge), []).append(r)
+        groups.setdefault(_group_key(r), []).append(r)
     limit = ("none" if options.timeout_s is None else
              f"{options.timeout_s:g} s (hard limit {options.hard_limit_s:g} s; passed to the solver: "
              f"{'yes' if solver_has_timeout() else 'no, the planner has no timeout option'})")
     lines = [
         "# Benchmark summary", "",
         f"{len(rows)} runs, {options.jobs} at a time; timeout: {limit}.",
-        "Times are the solver's own wall time (`stats.time_s` of the plan, worker start-up "
-        "excluded), over solved runs; with more than one job at a time runs share the CPUs.", "",
-        "| scenario | engine | K | runs | solved | executes in simulation | success | timeout | error "
-        "| median time (s) | mean time (s) | max time (s) | median steps |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "Success: solved runs over runs (seeds), with the 95 % Wilson interval. Times are the solver's own "
+        "wall time (`stats.time_s` of the plan, worker start-up excluded), over solved runs: median "
+        "[first quartile, third quartile]; with more than one job at a time runs share the CPUs.", "",
+        "| scenario | planner | engine | K | runs | solved | success (95 % CI) | executes in simulation "
+        "| timeout | error | time (s), median [Q1, Q3] | max time (s) |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    measure_lines = [
+        "", "## Plans, medians over solved runs", "",
+        "Regrasps: AdjustGrasp steps that change the grasp while the object is held; finger travel: "
+        "the gripper's path (mm); object path: mm travelled and degrees turned; support margin: the "
+        "plan's smallest (`stats.support_margin`). See docs/benchmarks.md.", "",
+        "| scenario | planner | engine | K | steps | regrasps | finger travel (mm) | object path (mm) "
+        "| object turn (deg) | support margin |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     tiers = ("setup", "symbolic", "streams", "grasp_graph")
     tier_lines = [
         "", "## Median time per tier, solved runs (s)", "",
-        "| scenario | engine | K | " + " | ".join(tiers) + " | total |",
-        "| --- | --- | ---: |" + " ---: |" * (len(tiers) + 1),
+        "| scenario | planner | engine | K | " + " | ".join(tiers) + " | total |",
+        "| --- | --- | --- | ---: |" + " ---: |" * (len(tiers) + 1),
     ]
-    for (scenario, engine, k), rs in groups.items():
+    for (scenario, planner, engine, k), rs in groups.items():
+        head = f"| {scenario} | {planner} | {engine or '-'} | {k} "
         ok = [r for r in rs if r.status is BenchStatus.SOLVED]
         times = [r.time_total_s for r in ok if r.time_total_s is not None]
-        count = {s: sum(r.status is s for r in rs) for s in BenchStatus}
-        steps = [r.steps for r in ok if r.steps is not None]
+        count = {st: sum(r.status is st for r in rs) for st in BenchStatus}
         simulated = [r for r in ok if r.executes is not None]
         executes = f"{sum(bool(r.executes) for r in simulated)}/{len(simulated)}" if simulated else "-"
+        lo, hi = wilson_interval(len(ok), len(rs))
+        q = quartiles(times)
+        time_cell = "-" if q is None else f"{q[1]:.2f} [{q[0]:.2f}, {q[2]:.2f}]"
         lines.append(
-            f"| {scenario} | {engine} | {k} | {len(rs)} | {len(ok)} | {executes} | {100 * len(ok) / len(rs):.0f}% "
-            f"| {count[BenchStatus.TIMEOUT]} | {count[BenchStatus.ERROR]} "
-            f"| {_num(statistics.median(times) if times else None)} "
-            f"| {_num(statistics.fmean(times) if times else None)} | {_num(max(times) if times else None)} "
-            f"| {_num(statistics.median(steps) if steps else None, 1)} |")
+            head + f"| {len(rs)} | {len(ok)} | {100 * len(ok) / len(rs):.0f}% ({100 * lo:.0f}-{100 * hi:.0f}%) "
+            f"| {executes} | {count[BenchStatus.TIMEOUT]} | {count[BenchStatus.ERROR]} "
+            f"| {time_cell} | {_num(max(times) if times else None)} |")
+        turn = [None if r.object_rotation_rad is None else math.degrees(r.object_rotation_rad) for r in ok]
+        measure_lines.append(
+            head + f"| {_median([r.steps for r in ok])} | {_median([r.regrasps for r in ok])} "
+            f"| {_median([r.finger_travel_mm for r in ok], 0)} | {_median([r.object_path_mm for r in ok], 0)} "
+            f"| {_median(turn, 0)} | {_median([r.support_margin for r in ok], 3)} |")
         medians = []
         for t in (*tiers, "total"):
             vals = [v for r in ok if (v := getattr(r, f"time_{t}_s")) is not None]
             medians.append(_num(statistics.median(vals) if vals else None))
-        tier_lines.append(f"| {scenario} | {engine} | {k} | " + " | ".join(medians) + " |")
-    lines += tier_lines
+        tier_lines.append(head + "| " + " | ".join(medians) + " |")
+    lines += measure_lines + tier_lines
     unsolved = [r for r in rows if r.status is not BenchStatus.SOLVED]
     if unsolved:
         lines += ["", "## Runs not solved", ""]
@@ -563,7 +666,8 @@ def format_summary(rows: Sequence[BenchRow], options: BenchOptions) -> str:
             reason = " ".join(r.reason.split())
             if len(reason) > 300:
                 reason = reason[:297] + "..."
-            lines.append(f"- {r.scenario}, {r.engine}, K {r.samples_per_edge}, seed {r.seed}: "
+            engine = f", {r.engine}" if r.engine else ""
+            lines.append(f"- {r.scenario}, {r.planner}{engine}, K {r.samples_per_edge}, seed {r.seed}: "
                          f"**{r.status.value}**: {reason}")
     return "\n".join(lines) + "\n"
 
@@ -616,7 +720,7 @@ def run_bench(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions
     def on_row(done: int, row: BenchRow) -> None:
         finished.append(row)
         t = f"{row.time_total_s:.2f} s" if row.time_total_s is not None else f"{row.wall_s:.2f} s wall"
-        say(f"[{done}/{len(specs)}] {row.scenario} {row.engine} K={row.samples_per_edge} "
+        say(f"[{done}/{len(specs)}] {row.scenario} {row.planner}{' ' + row.engine if row.engine else ''} K={row.samples_per_edge} "
             f"seed={row.seed}: {row.status.value} ({t})")
         write_results(finished, out_dir, options, summary=False)
 

@@ -1,5 +1,7 @@
-"""Scaling figures from benchmark rows (:mod:`ldhp_tamp.bench`): planning time against K
-(samples per edge) and against the object's vertex count, PNG and SVG.
+"""Figures from benchmark rows (:mod:`ldhp_tamp.bench`), PNG and SVG: the planners
+compared per scenario (:func:`plot_comparison`: success rate with its 95 % Wilson interval,
+solve time median and quartiles), and planning time against K (samples per edge) and
+against the object's vertex count (:func:`plot_scaling`).
 
 matplotlib is imported when a figure is drawn, with the ``Agg`` backend (no display).
 Each figure has two panels: the solve time (``time_total_s``) and the number of
@@ -22,7 +24,7 @@ from pathlib import Path
 from ldhp_tamp.bench import BenchRow, BenchStatus
 from ldhp_tamp.files import atomic_output
 
-__all__ = ["Axis", "SAMPLES", "VERTICES", "plot_scaling", "write_plots"]
+__all__ = ["Axis", "COMPARISON", "SAMPLES", "VERTICES", "plot_comparison", "plot_scaling", "write_plots"]
 
 log = logging.getLogger(__name__)
 
@@ -159,11 +161,96 @@ def plot_scaling(rows: Sequence[BenchRow], axis: Axis, out_dir: str | os.PathLik
     return paths
 
 
+COMPARISON = "comparison"
+
+
+def plot_comparison(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str],
+                    stem: str = COMPARISON) -> tuple[Path, Path] | None:
+    """Planners side by side, one group of bars per scenario, one bar per planner (and
+    engine, when the rows hold several): the success rate over the seeds with its 95 %
+    Wilson interval, and the solve time of the solved runs (median, the bar from the
+    first to the third quartile; log scale when the times span more than a factor 10).
+    Writes ``<stem>.png`` and ``<stem>.svg``; ``None`` when there are no rows."""
+    if not rows:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    from ldhp_tamp.bench import quartiles, wilson_interval
+
+    scenarios = list(dict.fromkeys(r.scenario for r in rows))
+    engines = {r.engine for r in rows if r.engine}
+
+    def series_of(r: BenchRow) -> str:
+        return f"{r.planner} ({r.engine})" if len(engines) > 1 and r.engine else r.planner
+
+    series = list(dict.fromkeys(series_of(r) for r in rows))
+    width = 0.8 / len(series)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig, (ax_s, ax_t) = plt.subplots(2, 1, figsize=(max(7.0, 1.1 * len(scenarios) * max(1, len(series)) ** 0.5 + 3),
+                                                     7.5), constrained_layout=True, sharex=True)
+    times: list[float] = []
+    for j, name in enumerate(series):
+        colour = colours[j % len(colours)]
+        xs, rate, err_lo, err_hi = [], [], [], []
+        tx, tmed, tlo, thi = [], [], [], []
+        for i, sc in enumerate(scenarios):
+            rs = [r for r in rows if r.scenario == sc and series_of(r) == name]
+            if not rs:
+                continue
+            x = i - 0.4 + width * (j + 0.5)
+            ok = [r for r in rs if r.status is BenchStatus.SOLVED]
+            lo, hi = wilson_interval(len(ok), len(rs))
+            p = len(ok) / len(rs)
+            xs.append(x)
+            rate.append(100 * p)
+            err_lo.append(100 * (p - lo))
+            err_hi.append(100 * (hi - p))
+            q = quartiles([r.time_total_s for r in ok if r.time_total_s is not None])
+            if q is not None:
+                tx.append(x)
+                tmed.append(q[1])
+                tlo.append(q[1] - q[0])
+                thi.append(q[2] - q[1])
+                times += [q[0], q[2]]
+        ax_s.bar(xs, rate, width * 0.9, yerr=[err_lo, err_hi], color=colour, label=name, capsize=3,
+                 error_kw={"elinewidth": 1, "ecolor": "black", "alpha": 0.7})
+        if tx:
+            ax_t.errorbar(tx, tmed, yerr=[tlo, thi], fmt="o", color=colour, capsize=3, markersize=5)
+    ax_s.set_ylim(0, 105)
+    ax_s.set_ylabel("solved (%), 95 % Wilson interval")
+    ax_s.legend(fontsize=8, loc="best")
+    ax_s.grid(True, axis="y", alpha=0.35)
+    positive = [t for t in times if t > 0]
+    if positive and max(positive) > _LOG_SPAN * min(positive):
+        ax_t.set_yscale("log")
+        ax_t.set_ylabel("solve time, solved runs (s, log scale)\nmedian and quartiles")
+        ax_t.yaxis.set_major_formatter(FuncFormatter(lambda y, _pos: _short(y)))
+    else:
+        ax_t.set_ylim(bottom=0)
+        ax_t.set_ylabel("solve time, solved runs (s)\nmedian and quartiles")
+    ax_t.grid(True, axis="y", alpha=0.35)
+    ax_t.set_xticks(range(len(scenarios)), scenarios, rotation=30, ha="right", fontsize=8)
+    seeds = len({r.seed for r in rows})
+    fig.suptitle(f"Planners compared ({seeds} seed{'s' if seeds != 1 else ''} per scenario)")
+    out = Path(out_dir)
+    paths = (out / f"{stem}.png", out / f"{stem}.svg")
+    for path in paths:
+        with atomic_output(path, binary=True) as (f, _tmp):
+            fig.savefig(f, format=path.suffix[1:], dpi=150)
+    plt.close(fig)
+    return paths
+
+
 def write_plots(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str],
                 hard_limit_s: float | None = None) -> list[Path]:
-    """Every figure the rows support: against K when they hold two or more K values,
-    against the vertex count when two or more vertex counts. Returns the files written."""
-    written: list[Path] = []
+    """Every figure the rows support: the planners compared (success rate and time per
+    scenario), against K when they hold two or more K values, against the vertex count
+    when two or more vertex counts. Returns the files written."""
+    written: list[Path] = list(plot_comparison(rows, out_dir) or ())
     for axis in (SAMPLES, VERTICES):
         paths = plot_scaling(rows, axis, out_dir, hard_limit_s)
         if paths:

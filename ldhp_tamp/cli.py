@@ -206,6 +206,20 @@ def _comma_names(text: str) -> tuple[str, ...]:
     return names
 
 
+def _planner_names(text: str) -> tuple[str, ...]:
+    """``--planners``: comma-separated names; a ``cmd:`` item takes the rest of the text,
+    commas included (so it comes last)."""
+    head, sep, cmd = text.partition("cmd:")
+    names = [n.strip() for n in head.split(",") if n.strip()]
+    if sep:
+        if not cmd.strip():
+            raise argparse.ArgumentTypeError("cmd: needs a command, e.g. cmd:'my-planner {scenario} {plan}'")
+        names.append(sep + cmd.strip())
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected comma-separated planner names, got {text!r}")
+    return tuple(names)
+
+
 def _comma_ints(text: str) -> tuple[int, ...]:
     try:
         return tuple(int(n) for n in text.split(",") if n.strip())
@@ -218,7 +232,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     Exit 0 when the bench ran, whatever the solves' outcomes (they are in the rows)."""
     from ldhp_tamp.bench import BenchOptions, run_bench
 
-    options = BenchOptions(engines=args.engines, seeds=args.seeds, samples=args.samples,
+    options = BenchOptions(engines=args.engines, planners=args.planners, seeds=args.seeds, samples=args.samples,
                            timeout_s=args.timeout, grace_s=args.grace, jobs=args.jobs,
                            simulate=not args.no_simulate)
     quiet = args.quiet
@@ -400,8 +414,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "solve, the whole failure (tier, cause, counts, every attempt)")
     _add_strict(p)
 
-    p = sub.add_parser("bench", help="benchmark: every scenario x engine x K x seed, in worker processes",
-                       description="Solve every combination scenario x engine x K x seed, each in a worker\n"
+    p = sub.add_parser("bench", help="benchmark: every scenario x planner x engine x K x seed, in worker processes",
+                       description="Solve every combination scenario x planner x engine x K x seed, each in a worker\n"
                                    "process of its own (at most --jobs at once), and write runs.csv,\n"
                                    "runs.json and summary.md (success rate, times, plan length) into --out;\n"
                                    "--plots adds time-against-K and time-against-vertex-count figures.\n"
@@ -411,8 +425,13 @@ def build_parser() -> argparse.ArgumentParser:
                               "the problem); nothing was run\n",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenarios", nargs="+", metavar="SCENARIO", help="scenario TOML files")
+    p.add_argument("--planners", type=_planner_names, default=("ldhp",), metavar="P,Q",
+                   help="comma-separated planners: ldhp, ldhp-norefine, ldhp-nofeedback, contact-rrt, or "
+                        "cmd:'PROGRAM {scenario} {plan}' (an external program that writes an ldhp-plan/1 "
+                        "file; last, it takes the rest of the text) (default: ldhp)")
     p.add_argument("--engines", type=_comma_names, metavar="A,B",
-                   help="comma-separated engines, e.g. pyperplan,fast-downward (default: each scenario's)")
+                   help="comma-separated engines, e.g. pyperplan,fast-downward (default: each scenario's); "
+                        "for the planners with a symbolic tier")
     p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0..N-1 per combination (default 1)")
     p.add_argument("--samples", type=_comma_ints, metavar="K1,K2",
                    help="comma-separated K, grasp samples per edge (default: each scenario's)")

@@ -40,7 +40,8 @@ from ldhp_tamp.errors import InputError, PlanFormatError
 from ldhp_tamp.scenario import Scenario
 from ldhp_tamp.tamp import SolveOptions, SolveResult, SolveStatus
 
-__all__ = ["CMD_PREFIX", "CommandPlanner", "PLANNERS", "Planner", "get_planner", "planner_names", "register"]
+__all__ = ["CMD_PREFIX", "CommandPlanner", "PLANNERS", "Planner", "get_planner", "planner_names", "register",
+           "uses_engine"]
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +92,15 @@ def ldhp_nofeedback(scenario: Scenario, options: SolveOptions) -> SolveResult:
     from ldhp_tamp.tamp import solve
 
     return solve(scenario, replace(options, feedback=False))
+
+
+#: The planners with a symbolic tier: the bench runs them once per engine.
+WITH_ENGINE = frozenset({"ldhp", "ldhp-norefine", "ldhp-nofeedback"})
+
+
+def uses_engine(name: str) -> bool:
+    """Whether planner ``name`` plans with a symbolic engine (``--engines`` applies)."""
+    return name in WITH_ENGINE
 
 
 def planner_names() -> tuple[str, ...]:
@@ -157,6 +167,8 @@ class CommandPlanner:
             argv = tuple(shlex.split(template))
         except ValueError as exc:
             raise InputError(f"planner {CMD_PREFIX}{template!r}: cannot parse the command: {exc}") from None
+        if len(argv) == 1 and any(c.isspace() for c in argv[0]):
+            return cls.parse(argv[0])  # the whole command quoted once more: cmd:'PROGRAM {scenario} {plan}'
         if not argv:
             raise InputError(f"planner {CMD_PREFIX}{template!r}: no program given")
         if not any("{plan}" in a for a in argv):
@@ -167,6 +179,12 @@ class CommandPlanner:
     @property
     def name(self) -> str:
         return CMD_PREFIX + shlex.join(self.argv)
+
+    @property
+    def label(self) -> str:
+        """How a reason names the program: its command line (the template), files by
+        their base name."""
+        return "'" + " ".join(os.path.basename(a) if os.sep in a and "{" not in a else a for a in self.argv) + "'"
 
     def __call__(self, scenario: Scenario, options: SolveOptions) -> SolveResult:
         from ldhp_tamp import budget
@@ -186,13 +204,13 @@ class CommandPlanner:
                 proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                         stderr=subprocess.PIPE, start_new_session=True, cwd=tmp)
             except OSError as exc:
-                return self._failed(scenario, start, f"cannot run {argv[0]!r}: {exc.strerror or exc}")
+                return self._failed(scenario, start, f"cannot run {self.label}: {exc.strerror or exc}")
             try:
                 _, err = proc.communicate(timeout=limit)
             except subprocess.TimeoutExpired:
                 _kill_group(proc)
                 return self._failed(scenario, start, f"timeout: the {options.timeout:g} s budget ran out in the "
-                                    f"external planner {argv[0]!r} (terminated)", timeout=True)
+                                    f"external planner {self.label} (terminated)", timeout=True)
             finally:
                 if proc.poll() is None:  # an exception (Ctrl-C, SIGTERM): the program goes too
                     _kill_group(proc)
@@ -200,17 +218,17 @@ class CommandPlanner:
             if proc.returncode != 0:
                 how = (f"killed by signal {-proc.returncode}" if proc.returncode < 0
                        else f"exit status {proc.returncode}")
-                return self._failed(scenario, start, f"the external planner {argv[0]!r} failed ({how})"
+                return self._failed(scenario, start, f"the external planner {self.label} failed ({how})"
                                     + (f": {stderr}" if stderr else ""))
             if not plan_path.exists():
-                return self._failed(scenario, start, f"the external planner {argv[0]!r} wrote no plan file")
+                return self._failed(scenario, start, f"the external planner {self.label} wrote no plan file")
             from ldhp_tamp.plan import read_plan
 
             try:
                 plan = read_plan(plan_path)
             except PlanFormatError as exc:
                 text = str(exc).replace(str(plan_path), "its plan")
-                return self._failed(scenario, start, f"the external planner {argv[0]!r} wrote no readable "
+                return self._failed(scenario, start, f"the external planner {self.label} wrote no readable "
                                     f"ldhp-plan/1 file: {text}")
         elapsed = budget.clock() - start
         stats = replace(plan.stats, time_s=dict(plan.stats.time_s, total=round(elapsed, 4)))

@@ -69,7 +69,7 @@ def test_bench_of_the_pick_example_two_seeds_two_jobs(tmp_path: Path, capsys: py
     assert doc["rows"][0]["time_total_s"] == pytest.approx(float(rows[0]["time_total_s"]), abs=1e-4)
 
     summary = (out / "summary.md").read_text(encoding="utf-8")
-    assert "| example-pick | pyperplan | 100 | 2 | 2 | 2/2 | 100% | 0 | 0 |" in summary
+    assert "| example-pick | ldhp | pyperplan | 100 | 2 | 2 | 100% (34-100%) | 2/2 | 0 | 0 |" in summary
     assert "## Median time per tier" in summary and "Runs not solved" not in summary
     assert summary in stdout and "runs.csv" in stdout
     assert not list(out.glob(".*.tmp*")), "atomic writes leave no temporary files"
@@ -88,7 +88,7 @@ def test_a_run_over_the_hard_limit_is_a_timeout_row(tmp_path: Path) -> None:
     assert elapsed < 60
     rows, files = run_bench([TASK1], options, tmp_path)
     assert [r.status for r in rows] == [BenchStatus.TIMEOUT]
-    assert "| task1-zero-mobility-lift | pyperplan | 100 | 1 | 0 | - | 0% | 1 | 0 |" in files.summary.read_text()
+    assert "| task1-zero-mobility-lift | ldhp | pyperplan | 100 | 1 | 0 | 0% (0-79%) | - | 1 | 0 |" in files.summary.read_text()
     assert next(csv.DictReader(files.csv.open()))["status"] == "timeout"
 
 
@@ -164,8 +164,10 @@ def test_summary_counts_statuses_and_times_solved_runs_only() -> None:
             _row(10, 2, BenchStatus.FAILED, 9.0, 900, 0, reason="bottom tier: no grasp"),
             _row(10, 3, BenchStatus.TIMEOUT, None, reason="hard limit")]
     text = format_summary(rows, BenchOptions(seeds=4, timeout_s=5))
-    assert "| s | pyperplan | 10 | 4 | 2 | - | 50% | 1 | 0 | 2.00 | 2.00 | 3.00 | 3.0 |" in text
-    assert "| s | pyperplan | 10 | 0.50 | - | - | 1.00 | 2.00 |" in text  # per tier: setup, ..., total
+    # success 2/4 with its 95 % Wilson interval; time median [Q1, Q3] and max over solved runs
+    assert "| s | ldhp | pyperplan | 10 | 4 | 2 | 50% (15-85%) | - | 1 | 0 | 2.00 [1.50, 2.50] | 3.00 |" in text
+    assert "| s | ldhp | pyperplan | 10 | 3.0 | - | - | - | - | - |" in text  # median steps of solved runs
+    assert "| s | ldhp | pyperplan | 10 | 0.50 | - | - | 1.00 | 2.00 |" in text  # per tier: setup, ..., total
     assert "seed 2: **failed**: bottom tier: no grasp" in text and "seed 3: **timeout**" in text
     lines = format_csv(rows).splitlines()
     assert lines[0] == ",".join(COLUMNS) and len(lines) == 5
@@ -176,9 +178,11 @@ def test_plots_against_k_are_written_as_png_and_svg(tmp_path: Path) -> None:
     rows = [_row(k, s, BenchStatus.SOLVED, 0.01 * k + s, 100 * k, 2) for k in (10, 50, 200) for s in (0, 1)]
     rows.append(_row(200, 2, BenchStatus.TIMEOUT, None))
     written = write_plots(rows, tmp_path, hard_limit_s=12.0)
-    assert [p.name for p in written] == ["time_vs_samples.png", "time_vs_samples.svg"]  # one vertex count
-    assert written[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    svg = written[1].read_text(encoding="utf-8")
+    assert [p.name for p in written] == ["comparison.png", "comparison.svg",  # planners side by side
+                                         "time_vs_samples.png", "time_vs_samples.svg"]  # one vertex count
+    assert written[2].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "solved (%), 95 % Wilson interval" in written[1].read_text(encoding="utf-8")
+    svg = written[3].read_text(encoding="utf-8")
     assert "<svg" in svg and "planning time (s)" in svg
     assert plot_scaling(rows[:2], SAMPLES, tmp_path / "none") is None  # a single K: no figure
 
@@ -219,8 +223,8 @@ def test_bench_plots_flag_draws_time_against_k(tmp_path: Path, capsys: pytest.Ca
     out = tmp_path / "k"
     assert main(["bench", str(PICK), "--samples", "10,25", "--plots", "--out", str(out), "-q"]) == EXIT_OK
     stdout = capsys.readouterr().out
-    assert "| example-pick | pyperplan | 10 | 1 | 1 | 1/1 | 100%" in stdout
-    assert "| example-pick | pyperplan | 25 | 1 | 1 | 1/1 | 100%" in stdout
-    for name in ("time_vs_samples.png", "time_vs_samples.svg"):
+    assert "| example-pick | ldhp | pyperplan | 10 | 1 | 1 | 100% (21-100%) | 1/1 |" in stdout
+    assert "| example-pick | ldhp | pyperplan | 25 | 1 | 1 | 100% (21-100%) | 1/1 |" in stdout
+    for name in ("time_vs_samples.png", "time_vs_samples.svg", "comparison.png", "comparison.svg"):
         assert (out / name).stat().st_size > 1000 and name in stdout
     assert not (out / "time_vs_vertices.png").exists()  # one object: no vertex figure
