@@ -13,21 +13,22 @@ functions over small values::
 
 or all three at once with :func:`run_bench`.
 
-Isolation and time limits. Each run gets a fresh process (forked from a forkserver that
-has imported the planner once, so a run costs no import time) in a process group of its
-own; at most ``jobs`` run at once. A run that crashes, or raises, is an ``error`` row; the
-others carry on. With ``timeout_s`` the run's solve gets ``SolveOptions(timeout=...)``
-when the planner has that option, and the parent enforces ``timeout_s + grace_s`` as a
-hard limit by terminating the whole process group (Fast Downward's planner process
-included): that run is a ``timeout`` row. Fast Downward writes files into its working
-directory; :func:`ldhp_tamp.symbolic.solve` runs every engine call in a fresh
-``tempfile`` directory, and a process's working directory is its own, so parallel runs
-never share one.
+Isolation and time limits. Each run is a process of its own, in a process group of its
+own, through :func:`ldhp_tamp.sweep.run_cells`: ``executor`` ``local`` (at most ``jobs``
+processes forked from a forkserver that has imported the planner once) or ``dask`` (one
+Dask task per run, on a ``LocalCluster`` of ``jobs`` workers or on ``scheduler``). A run
+that crashes, or raises, or whose Dask worker dies, is an ``error`` row; the others carry
+on. With ``timeout_s`` the run's solve gets ``SolveOptions(timeout=...)`` when the planner
+has that option, and ``timeout_s + grace_s`` is a hard limit: the run's whole process
+group (Fast Downward's planner process included) is terminated, and the run is a
+``timeout`` row. Fast Downward writes files into its working directory;
+:func:`ldhp_tamp.symbolic.solve` runs every engine call in a fresh ``tempfile``
+directory, and a process's working directory is its own, so parallel runs never share one.
 
-Why not :class:`concurrent.futures.ProcessPoolExecutor`: it cannot stop one task. Killing
-a pool worker breaks the pool (``BrokenProcessPool`` fails every pending future), and a
-task that hangs holds its worker forever. The scheduler here is the same idea (``jobs``
-workers, results collected as they come) with one process per run, which it can kill.
+Resuming. ``run_bench(..., resume=True)`` (the CLI's default) keeps the rows of an
+existing ``out_dir/runs.json`` whose status is final (``solved``, ``failed``,
+``timeout``) and runs only the others; the file must come from a bench with the same
+time limit and simulation setting (:func:`read_rows`).
 
 Times. ``time_*_s`` are the solve's own wall time per tier (the plan's ``stats.time_s``);
 ``wall_s`` is the parent's wall time for the run, process start-up included. The summary
@@ -37,7 +38,6 @@ compare times taken with the same ``jobs`` only.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import enum
@@ -45,15 +45,10 @@ import io
 import json
 import logging
 import math
-import multiprocessing
-import multiprocessing.connection
 import os
 import platform
-import signal
 import statistics
 import time
-import traceback
-from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -62,6 +57,7 @@ from typing import Any
 
 from ldhp_tamp.errors import EngineError, InputError
 from ldhp_tamp.files import write_text_atomic
+from ldhp_tamp.sweep import CellFailure, CellTask, SweepOptions, check_executor, run_cells
 
 __all__ = [
     "BENCH_FORMAT",
@@ -75,6 +71,7 @@ __all__ = [
     "format_json",
     "format_summary",
     "plan_runs",
+    "read_rows",
     "run_all",
     "run_bench",
     "solve_run",
@@ -126,8 +123,14 @@ class BenchOptions:
     simulate: bool = True
     """Replay every solved plan in the physics simulation (:mod:`ldhp_tamp.simulate`):
     the ``executes`` column."""
+    executor: str = "local"
+    """Where the runs go: ``local`` processes or ``dask`` (:mod:`ldhp_tamp.sweep`)."""
+    scheduler: str | None = None
+    """``dask``: a running scheduler, ``tcp://HOST:PORT``; ``None``: a ``LocalCluster``
+    of ``jobs`` workers."""
 
     def __post_init__(self) -> None:
+        check_executor(self.executor, self.scheduler)
         if self.engines is not None:
             object.__setattr__(self, "engines", tuple(self.engines))
             if not self.engines:
@@ -369,135 +372,43 @@ def _status(solve_status: str, total_s: float | None, timeout_s: float | None) -
     return status
 
 
-def _on_sigterm(signum: int, _frame: Any) -> None:
-    raise SystemExit(128 + signum)  # unwinds: temporary directories are removed
+def _failed_row(spec: RunSpec, failure: CellFailure, reason: str, wall_s: float) -> BenchRow:
+    """The row of a run whose process raised or died (``error``) or passed the hard limit
+    (``timeout``)."""
+    return _row(spec, BenchStatus(failure.value), reason, wall_s)
 
 
-def _worker(spec: RunSpec, conn: multiprocessing.connection.Connection) -> None:
-    """Body of a worker process: one run, one row sent back through ``conn``."""
-    os.setpgid(0, 0)  # a process group of its own: the parent stops the engine's children too
-    signal.signal(signal.SIGTERM, _on_sigterm)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
-    start = time.perf_counter()
-    try:
-        row = solve_run(spec)
-    except Exception as exc:  # any failure of one run is a row, not a crash of the bench
-        last = traceback.extract_tb(exc.__traceback__)[-1:]
-        where = f" (at {Path(last[0].filename).name}:{last[0].lineno})" if last else ""
-        row = _row(spec, BenchStatus.ERROR, f"{type(exc).__name__}: {exc}{where}", time.perf_counter() - start)
-    conn.send(row)
-    conn.close()
+def _with_wall(row: BenchRow, wall_s: float) -> BenchRow:
+    """The row with the executor's wall time for the run (process start-up included)."""
+    return dataclasses.replace(row, wall_s=round(wall_s, 4))
 
 
-@dataclass
-class _Active:
-    spec: RunSpec
-    process: multiprocessing.process.BaseProcess
-    conn: multiprocessing.connection.Connection
-    start: float
-    deadline: float | None
-
-
-def _context() -> multiprocessing.context.BaseContext:
-    """A forkserver that has imported the planner (a fork then costs no import time);
-    ``spawn`` where there is no forkserver."""
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["ldhp_tamp.bench", "ldhp_tamp.tamp"])
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
-def _start(ctx: multiprocessing.context.BaseContext, spec: RunSpec, hard_limit_s: float | None) -> _Active:
-    reader, writer = ctx.Pipe(duplex=False)
-    process = ctx.Process(target=_worker, args=(spec, writer), name=f"ldhp-bench-{spec.index}")
-    process.start()  # the first start waits for the forkserver's imports: not the run's time
-    start = time.monotonic()
-    writer.close()  # the worker holds the only write end: EOF when it dies
-    deadline = None if hard_limit_s is None else start + hard_limit_s
-    return _Active(spec, process, reader, start, deadline)
-
-
-def _stop(active: _Active) -> None:
-    """Terminate a worker and its process group: SIGTERM, then SIGKILL."""
-    proc = active.process
-    pid = proc.pid
-    for sig, wait_s in ((signal.SIGTERM, _TERM_WAIT_S), (signal.SIGKILL, _EXIT_WAIT_S)):
-        if pid is None:
-            break
-        try:
-            os.killpg(pid, sig)
-        except (ProcessLookupError, PermissionError):
-            # the worker has not made its group yet (or is gone): signal it alone
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, sig)
-        proc.join(wait_s)
-        if proc.exitcode is not None:
-            # the group may outlive its leader (an engine's planner process)
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(pid, signal.SIGKILL)
-            break
-    active.conn.close()
-
-
-def _collect(active: _Active) -> BenchRow:
-    """The row of a worker whose pipe is readable: its row, or an error if it died."""
-    wall = time.monotonic() - active.start
-    try:
-        row: BenchRow | None = active.conn.recv()
-    except (EOFError, OSError):
-        row = None
-    active.process.join(_EXIT_WAIT_S)
-    if active.process.exitcode is None:
-        log.warning("run %d: the worker did not exit after its result; stopping it", active.spec.index)
-        _stop(active)
-    active.conn.close()
-    if row is None:
-        code = active.process.exitcode
-        how = f"killed by signal {-code}" if code is not None and code < 0 else f"exit status {code}"
-        return _row(active.spec, BenchStatus.ERROR, f"the worker process died without a result ({how})", wall)
-    return dataclasses.replace(row, wall_s=round(wall, 4))
+#: A bench run for :func:`ldhp_tamp.sweep.run_cells`: :func:`solve_run` in a process of its own.
+_TASK: CellTask[RunSpec, BenchRow] = CellTask(run=solve_run, failed=_failed_row, with_wall=_with_wall,
+                                              preload=("ldhp_tamp.bench", "ldhp_tamp.tamp"), name="bench")
 
 
 def run_all(specs: Sequence[RunSpec], options: BenchOptions,
             on_row: Callable[[int, BenchRow], None] | None = None) -> tuple[BenchRow, ...]:
-    """Run every spec, at most ``options.jobs`` at once, each in its own process.
+    """Run every spec, each in a process of its own under the hard limit, with
+    ``options.executor`` (:func:`ldhp_tamp.sweep.run_cells`: at most ``options.jobs``
+    local processes, or one Dask task per run).
 
     ``on_row(done, row)`` is called as each run ends (``done`` counts finished runs). The
     rows come back in the order of ``specs``. On an exception (Ctrl-C) the running
-    workers are stopped before it propagates.
+    runs are stopped before it propagates.
     """
-    ctx = _context()
-    pending = deque(specs)
-    active: list[_Active] = []
-    rows: dict[int, BenchRow] = {}
-    hard = options.hard_limit_s
-    try:
-        while pending or active:
-            while pending and len(active) < options.jobs:
-                active.append(_start(ctx, pending.popleft(), hard))
-            deadlines = [a.deadline for a in active if a.deadline is not None]
-            wait_s = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
-            ready = multiprocessing.connection.wait([a.conn for a in active], timeout=wait_s)
-            now = time.monotonic()
-            for a in list(active):
-                if a.conn in ready:
-                    row = _collect(a)
-                elif a.deadline is not None and now >= a.deadline:
-                    _stop(a)
-                    row = _row(a.spec, BenchStatus.TIMEOUT,
-                               f"hard limit: no result after {hard:g} s (timeout {options.timeout_s:g} s "
-                               f"+ grace {options.grace_s:g} s); the worker was terminated", now - a.start)
-                else:
-                    continue
-                active.remove(a)
-                rows[a.spec.index] = row
-                if on_row is not None:
-                    on_row(len(rows), row)
-    finally:
-        for a in active:
-            _stop(a)
-    return tuple(rows[s.index] for s in specs)
+    sweep = SweepOptions(executor=options.executor, jobs=options.jobs, scheduler=options.scheduler,
+                         hard_limit_s=options.hard_limit_s)
+    done = 0
+
+    def on_result(_position: int, row: BenchRow) -> None:
+        nonlocal done
+        done += 1
+        if on_row is not None:
+            on_row(done, row)
+
+    return tuple(run_cells(specs, _TASK, sweep, on_result))
 
 
 # --------------------------------------------------------------------------- outputs
@@ -544,6 +455,7 @@ def format_json(rows: Sequence[BenchRow], options: BenchOptions, created: str | 
                     "samples_per_edge": list(options.samples) if options.samples else None,
                     "timeout_s": options.timeout_s, "grace_s": options.grace_s,
                     "hard_limit_s": options.hard_limit_s, "jobs": options.jobs, "simulate": options.simulate,
+                    "executor": options.executor, "scheduler": options.scheduler,
                     "solver_timeout": options.timeout_s is not None and solver_has_timeout()},
         "host": _host(),
         "columns": list(COLUMNS),
@@ -696,26 +608,94 @@ def _out_dir(out_dir: str | os.PathLike[str]) -> Path:
     return out
 
 
+#: Statuses a resumed bench keeps; an ``error`` run (a crash, a lost worker) runs again.
+FINAL_STATUSES = frozenset({BenchStatus.SOLVED, BenchStatus.FAILED, BenchStatus.TIMEOUT})
+#: Options whose change makes the stored rows of another configuration.
+_RESUME_OPTIONS = ("timeout_s", "grace_s", "simulate")
+
+
+def _run_key(values: Callable[[str], Any]) -> tuple[Any, ...]:
+    """What identifies a run: every knob of :class:`RunSpec` that is also a column."""
+    return tuple(values(name) for name in _KEY_FIELDS)
+
+
+_KEY_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RunSpec) if f.name in COLUMNS)
+
+
+def read_rows(path: str | os.PathLike[str], options: BenchOptions) -> tuple[BenchRow, ...]:
+    """The rows of a ``runs.json`` written by a bench of the same configuration.
+
+    Raises
+    ------
+    InputError
+        A file that cannot be read or is not ``ldhp-bench/1`` with this version's columns,
+        or whose runs were made with another time limit or simulation setting (the
+        message names the file and the option).
+    """
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: cannot resume from it: {exc}; use --fresh or another --out") from None
+    if not isinstance(doc, dict) or doc.get("format") != BENCH_FORMAT or doc.get("columns") != list(COLUMNS):
+        raise InputError(f"{path}: cannot resume from it: not {BENCH_FORMAT} with this version's columns; "
+                         f"use --fresh or another --out")
+    stored = doc.get("options") or {}
+    for name in _RESUME_OPTIONS:
+        if stored.get(name) != getattr(options, name):
+            raise InputError(f"{path}: cannot resume from it: its runs were made with {name} = "
+                             f"{stored.get(name)!r}, this bench has {getattr(options, name)!r}; use --fresh "
+                             f"or another --out")
+    try:
+        return tuple(BenchRow(**{**r, "status": BenchStatus(r["status"])}) for r in doc.get("rows", []))
+    except (TypeError, KeyError, ValueError) as exc:
+        raise InputError(f"{path}: cannot resume from it: a malformed row ({exc}); use --fresh or "
+                         f"another --out") from None
+
+
+def _resumed(specs: Sequence[RunSpec], out_dir: str | os.PathLike[str],
+             options: BenchOptions) -> dict[int, BenchRow]:
+    """The stored rows of ``out_dir/runs.json`` with a final status, by the index of the
+    spec they stand for."""
+    path = Path(out_dir) / JSON_NAME
+    if not path.exists():
+        return {}
+    by_key = {_run_key(lambda n, r=r: getattr(r, n)): r for r in read_rows(path, options)
+              if r.status in FINAL_STATUSES}
+    return {s.index: row for s in specs if (row := by_key.get(_run_key(lambda n, s=s: getattr(s, n)))) is not None}
+
+
 def run_bench(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions,
               out_dir: str | os.PathLike[str],
-              progress: Callable[[str], None] | None = None) -> tuple[tuple[BenchRow, ...], BenchFiles]:
+              progress: Callable[[str], None] | None = None,
+              resume: bool = False) -> tuple[tuple[BenchRow, ...], BenchFiles]:
     """Check the input, run every combination, write the results.
 
     ``runs.csv`` and ``runs.json`` are rewritten as each run ends (so an interrupted bench
-    keeps what it measured), ``summary.md`` once at the end.
+    keeps what it measured), ``summary.md`` once at the end. With ``resume``, the runs
+    already in ``out_dir/runs.json`` with a final status are not run again (their rows
+    are kept as they are); the others run.
 
     Raises
     ------
     InputError
         Before anything runs: a scenario that cannot be loaded, an unknown engine, an
-        output directory that cannot be created.
+        output directory that cannot be created, a ``runs.json`` to resume from that
+        does not match (:func:`read_rows`).
+    ExecutorError
+        ``dask`` without the ``distributed`` package, or a scheduler that cannot be
+        reached.
     """
-    specs = plan_runs(scenarios, options)
+    all_specs = plan_runs(scenarios, options)
     _out_dir(out_dir)
+    kept = _resumed(all_specs, out_dir, options) if resume else {}
+    specs = tuple(s for s in all_specs if s.index not in kept)  # the runs to make
     say = progress or (lambda _msg: None)
-    say(f"{len(specs)} runs, {options.jobs} at a time"
+    where = "local" if options.executor == "local" else f"dask, {options.scheduler or 'a LocalCluster'}"
+    say(f"{len(all_specs)} runs"
+        + (f" ({len(kept)} already in {Path(out_dir) / JSON_NAME}, {len(specs)} to run)" if kept else "")
+        + (f", {options.jobs} at a time" if options.scheduler is None else "") + f" ({where})"
         + (f", hard limit {options.hard_limit_s:g} s per run" if options.hard_limit_s is not None else ""))
-    finished: list[BenchRow] = []  # in the order runs end
+    finished: list[BenchRow] = list(kept.values())  # in the order runs end
 
     def on_row(done: int, row: BenchRow) -> None:
         finished.append(row)
@@ -724,6 +704,7 @@ def run_bench(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions
             f"seed={row.seed}: {row.status.value} ({t})")
         write_results(finished, out_dir, options, summary=False)
 
-    rows = run_all(specs, options, on_row)
+    new = dict(zip((s.index for s in specs), run_all(specs, options, on_row)))
+    rows = tuple(kept.get(s.index) or new[s.index] for s in all_specs)
     files = write_results(rows, out_dir, options)
     return rows, files

@@ -234,14 +234,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     options = BenchOptions(engines=args.engines, planners=args.planners, seeds=args.seeds, samples=args.samples,
                            timeout_s=args.timeout, grace_s=args.grace, jobs=args.jobs,
-                           simulate=not args.no_simulate)
+                           simulate=not args.no_simulate, executor=args.executor, scheduler=args.scheduler)
     quiet = args.quiet
 
     def progress(msg: str) -> None:
         if not quiet:
             print(f"[ldhp-tamp bench] {msg}", file=sys.stderr, flush=True)
 
-    rows, files = run_bench(args.scenarios, options, args.out, progress=progress)
+    rows, files = run_bench(args.scenarios, options, args.out, progress=progress, resume=not args.fresh)
     written = [files.csv, files.json, files.summary]
     if args.plots:
         from ldhp_tamp.bench_plots import write_plots
@@ -419,6 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "process of its own (at most --jobs at once), and write runs.csv,\n"
                                    "runs.json and summary.md (success rate, times, plan length) into --out;\n"
                                    "--plots adds time-against-K and time-against-vertex-count figures.\n"
+                                   "Runs already in --out's runs.json (not 'error') are not run again.\n"
                                    "See docs/benchmarks.md.",
                        epilog="exit status:\n  0  the bench ran, whatever the solves' outcomes (see the "
                               "status column)\n  2  bad input or usage (the message names the file and "
@@ -441,8 +442,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grace", type=float, default=10.0, metavar="S",
                    help="seconds added to --timeout for the hard limit (default 10)")
     p.add_argument("--jobs", type=int, default=1, metavar="J", help="worker processes at once (default 1)")
+    _add_executor(p)
     p.add_argument("--out", default="bench-results", metavar="DIR",
-                   help="output directory (default: bench-results)")
+                   help="output directory (default: bench-results); a runs.json there is resumed")
+    p.add_argument("--fresh", action="store_true",
+                   help="run every combination, ignoring the runs already in --out's runs.json")
     p.add_argument("--no-simulate", action="store_true",
                    help="do not replay the solved plans in the physics simulation (the executes column stays empty)")
     p.add_argument("--plots", action="store_true",
