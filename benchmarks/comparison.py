@@ -1,0 +1,296 @@
+"""Regenerate docs/comparison.md: every shipped scenario x planner x seed, through the bench.
+
+Usage (from the repository root)::
+
+    .venv/bin/python benchmarks/comparison.py [--seeds 5] [--timeout 60] [--jobs 2]
+        [--planners ldhp,ldhp-norefine,...] [--scenarios FILE ...] [--out DIR]
+        [--doc docs/comparison.md] [--from-runs DIR/runs.json]
+
+It runs ``ldhp-tamp bench`` (:func:`ldhp_tamp.bench.run_bench`) over the scenarios (default:
+every ``scenarios/*.toml``) and planners (default: every registered one,
+:func:`ldhp_tamp.planners.planner_names`) with seeds ``0 .. seeds-1``, each run in a worker
+process under ``--timeout`` seconds (the solver's budget; the harness stops it at
+``timeout + grace``), every solved plan replayed in the physics simulation. The bench's
+files (``runs.csv``, ``runs.json``, ``summary.md``, ``comparison.png/.svg``) go to
+``--out``; the comparison figure is drawn next to the document (``docs/comparison/``).
+
+Only the blocks between ``<!-- BEGIN generated: NAME -->`` and ``<!-- END generated: NAME -->``
+of the document are replaced (``context``, ``totals``, ``table``, ``findings``,
+``figure``); the prose around them is kept. ``--from-runs`` rewrites the blocks from an
+earlier run's ``runs.json`` without running anything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import subprocess
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import fields
+from datetime import datetime, timezone
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from ldhp_tamp.bench import BenchOptions, BenchRow, BenchStatus, quartiles, run_bench, wilson_interval  # noqa: E402
+from ldhp_tamp.bench_plots import plot_comparison  # noqa: E402
+from ldhp_tamp.errors import InputError  # noqa: E402
+from ldhp_tamp.files import write_text_atomic  # noqa: E402
+
+BLOCKS = ("context", "totals", "table", "findings", "figure")
+DOC = REPO / "docs" / "comparison.md"
+
+
+def begin(name: str) -> str:
+    return f"<!-- BEGIN generated: {name} -->"
+
+
+def end(name: str) -> str:
+    return f"<!-- END generated: {name} -->"
+
+
+def replace_blocks(text: str, blocks: Mapping[str, str]) -> str:
+    """``text`` with the body of each named generated block replaced.
+
+    >>> replace_blocks("a\\n<!-- BEGIN generated: x -->\\nold\\n<!-- END generated: x -->\\n", {"x": "new"})
+    'a\\n<!-- BEGIN generated: x -->\\nnew\\n<!-- END generated: x -->\\n'
+    """
+    for name, body in blocks.items():
+        b, e = begin(name), end(name)
+        i, j = text.find(b), text.find(e)
+        if i < 0 or j < i:
+            raise InputError(f"the document has no block {name!r} ({b} ... {e})")
+        text = text[:i + len(b)] + "\n" + body.rstrip("\n") + "\n" + text[j:]
+    return text
+
+
+def skeleton() -> str:
+    return "# Planners compared\n\n" + "\n\n".join(f"{begin(n)}\n_Not generated yet._\n{end(n)}" for n in BLOCKS) + "\n"
+
+
+def read_rows(path: Path) -> tuple[list[BenchRow], dict]:
+    """The rows (and the options) of a bench's ``runs.json``."""
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    names = {f.name for f in fields(BenchRow)}
+    rows = []
+    for r in doc["rows"]:
+        values = {k: v for k, v in r.items() if k in names}
+        values["status"] = BenchStatus(values["status"])
+        rows.append(BenchRow(**values))
+    return rows, doc.get("options", {})
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+
+
+def _ci(ok: int, n: int) -> str:
+    lo, hi = wilson_interval(ok, n)
+    return f"{ok}/{n} ({100 * lo:.0f}-{100 * hi:.0f}%)"
+
+
+def _median(values: Sequence[float | int | None], digits: int = 1) -> str:
+    vals = [v for v in values if v is not None]
+    return "-" if not vals else f"{statistics.median(vals):.{digits}f}"
+
+
+def _time(rows: Sequence[BenchRow]) -> str:
+    q = quartiles([r.time_total_s for r in rows if r.time_total_s is not None])
+    return "-" if q is None else f"{q[1]:.1f} [{q[0]:.1f}, {q[2]:.1f}]"
+
+
+def _solved(rows: Sequence[BenchRow]) -> list[BenchRow]:
+    return [r for r in rows if r.status is BenchStatus.SOLVED]
+
+
+def _executes(rows: Sequence[BenchRow]) -> str:
+    sim = [r for r in _solved(rows) if r.executes is not None]
+    return "-" if not sim else f"{sum(bool(r.executes) for r in sim)}/{len(sim)}"
+
+
+def format_context(options: Mapping, rows: Sequence[BenchRow], command: str, stamp: str, note: str) -> str:
+    commit = _git("rev-parse", "--short", "HEAD") or "unknown"
+    dirty = _git("status", "--porcelain", "--untracked-files=no")
+    scenarios = list(dict.fromkeys(r.scenario for r in rows))
+    planners = list(dict.fromkeys(r.planner for r in rows))
+    seeds = sorted({r.seed for r in rows})
+    lines = [
+        f"_Generated by `benchmarks/comparison.py` on {stamp} at commit `{commit}`"
+        + (" (with uncommitted changes in the working tree)" if dirty else "") + "._", "",
+        f"- Command: `{command}`",
+        f"- {len(rows)} runs: {len(scenarios)} scenario(s) x {len(planners)} planner(s) ({', '.join(planners)}) "
+        f"x {len(seeds)} seed(s) ({', '.join(map(str, seeds))}); each scenario's own engine and K.",
+        f"- Budget: {options.get('timeout_s')} s per run (the solver's own; the harness stops a run at "
+        f"{options.get('hard_limit_s')} s); {options.get('jobs')} run(s) at a time on "
+        f"{platform.machine()} with {__import__('os').cpu_count()} CPUs, Python {platform.python_version()}.",
+        "- Every solved plan was validated by its planner's judge (the validator for external and baseline "
+        "planners) and replayed in the physics simulation (`executes`).",
+    ]
+    if note:
+        lines.append(f"- **{note}**")
+    lines += ["", "Times are wall-clock on a shared machine: runs slow each other down when there are more "
+                  "jobs than free cores; compare numbers taken together only."]
+    return "\n".join(lines)
+
+
+def format_totals(rows: Sequence[BenchRow]) -> str:
+    planners = list(dict.fromkeys(r.planner for r in rows))
+    lines = ["| planner | runs solved (95 % CI) | scenarios solved at least once | solved plans executing "
+             "in simulation | time (s), median [Q1, Q3] | timeouts | errors |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for p in planners:
+        rs = [r for r in rows if r.planner == p]
+        ok = _solved(rs)
+        scen = {r.scenario for r in rs}
+        scen_ok = {r.scenario for r in ok}
+        lines.append(f"| {p} | {_ci(len(ok), len(rs))} | {len(scen_ok)}/{len(scen)} | {_executes(rs)} | {_time(ok)} "
+                     f"| {sum(r.status is BenchStatus.TIMEOUT for r in rs)} "
+                     f"| {sum(r.status is BenchStatus.ERROR for r in rs)} |")
+    return "\n".join(lines)
+
+
+def format_table(rows: Sequence[BenchRow]) -> str:
+    scenarios = list(dict.fromkeys(r.scenario for r in rows))
+    planners = list(dict.fromkeys(r.planner for r in rows))
+    lines = ["Success: solved runs over seeds, with the 95 % Wilson interval; the other columns are over the "
+             "solved runs (medians; time with its quartiles). Regrasps: AdjustGrasp steps that change the grasp "
+             "while the object is held (docs/benchmarks.md).", "",
+             "| scenario | planner | solved (95 % CI) | executes | time (s), median [Q1, Q3] | steps | regrasps "
+             "| finger travel (mm) | support margin |",
+             "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for sc in scenarios:
+        for p in planners:
+            rs = [r for r in rows if r.scenario == sc and r.planner == p]
+            if not rs:
+                continue
+            ok = _solved(rs)
+            lines.append(f"| {sc} | {p} | {_ci(len(ok), len(rs))} | {_executes(rs)} | {_time(ok)} "
+                         f"| {_median([r.steps for r in ok])} | {_median([r.regrasps for r in ok])} "
+                         f"| {_median([r.finger_travel_mm for r in ok], 0)} "
+                         f"| {_median([r.support_margin for r in ok], 3)} |")
+    return "\n".join(lines)
+
+
+def format_findings(rows: Sequence[BenchRow]) -> str:
+    """Statements computed from the rows: what each variant gains or loses against ``ldhp``,
+    where the seeds disagree, how each planner fails most often."""
+    planners = list(dict.fromkeys(r.planner for r in rows))
+    scenarios = list(dict.fromkeys(r.scenario for r in rows))
+
+    def rate(sc: str, p: str) -> tuple[int, int]:
+        rs = [r for r in rows if r.scenario == sc and r.planner == p]
+        return len(_solved(rs)), len(rs)
+
+    out: list[str] = []
+    if "ldhp" in planners:
+        for p in planners:
+            if p == "ldhp":
+                continue
+            better = [sc for sc in scenarios if rate(sc, p)[1] and rate(sc, p)[0] > rate(sc, "ldhp")[0]]
+            worse = [sc for sc in scenarios if rate(sc, p)[1] and rate(sc, p)[0] < rate(sc, "ldhp")[0]]
+            both = [sc for sc in scenarios if rate(sc, p)[0] and rate(sc, "ldhp")[0]]
+            faster = []
+            for sc in both:
+                a = [r.time_total_s for r in _solved([r for r in rows if r.scenario == sc and r.planner == p])]
+                b = [r.time_total_s for r in _solved([r for r in rows if r.scenario == sc and r.planner == "ldhp"])]
+                if a and b:
+                    faster.append(statistics.median(a) / statistics.median(b))
+            desc = (f"- **{p}** against **ldhp**: solves more seeds on {len(better)} scenario(s)"
+                    + (f" ({', '.join(better)})" if better else "")
+                    + f", fewer on {len(worse)}" + (f" ({', '.join(worse)})" if worse else ""))
+            if faster:
+                desc += (f"; where both solve, its median time is {statistics.median(faster):.2f} x ldhp's "
+                         f"(median over {len(faster)} scenario(s))")
+            out.append(desc + ".")
+    mixed = [f"{sc} ({p}: {rate(sc, p)[0]}/{rate(sc, p)[1]})" for sc in scenarios for p in planners
+             if 0 < rate(sc, p)[0] < rate(sc, p)[1]]
+    out.append("- Scenarios whose outcome depends on the seed: " + (", ".join(mixed) if mixed else "none") + ".")
+    for p in planners:
+        failed = [r for r in rows if r.planner == p and r.status is not BenchStatus.SOLVED]
+        if not failed:
+            continue
+        kinds: dict[str, int] = {}
+        for r in failed:
+            head = r.reason.split(":")[0].split("(")[0].strip() or r.status.value
+            if r.status is BenchStatus.TIMEOUT:
+                head = "timeout"
+            kinds[head] = kinds.get(head, 0) + 1
+        common = sorted(kinds.items(), key=lambda kv: -kv[1])[:3]
+        out.append(f"- **{p}** fails {len(failed)} run(s); most often in: "
+                   + ", ".join(f"{k} ({v})" for k, v in common) + ".")
+    diverged = [r for r in rows if r.status is BenchStatus.SOLVED and r.executes is False]
+    out.append(f"- Solved plans that diverge in the physics simulation: {len(diverged)}"
+               + (" (" + ", ".join(f"{r.scenario} {r.planner} seed {r.seed}" for r in diverged) + ")"
+                  if diverged else "") + ".")
+    return "\n".join(out)
+
+
+def format_figure(figure: Path | None, doc: Path) -> str:
+    if figure is None:
+        return "_No figure._"
+    rel = figure.relative_to(doc.parent)
+    return (f"![Success rate with its 95 % Wilson interval and solve time per scenario and planner]({rel.as_posix()})"
+            "\n\nTop: the share of seeds solved, with its 95 % Wilson interval; bottom: the solve time of the "
+            "solved runs (median, bar from the first to the third quartile).")
+
+
+def _scenarios(args: argparse.Namespace) -> list[str]:
+    if args.scenarios:
+        return list(args.scenarios)
+    return [str(p.relative_to(REPO)) for p in sorted((REPO / "scenarios").glob("*.toml"))]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--timeout", type=float, default=60.0, help="seconds per run (default 60)")
+    parser.add_argument("--grace", type=float, default=10.0)
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--planners", help="comma-separated (default: every registered planner)")
+    parser.add_argument("--scenarios", nargs="+", metavar="FILE", help="default: every scenarios/*.toml")
+    parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "out" / "comparison")
+    parser.add_argument("--doc", type=Path, default=DOC)
+    parser.add_argument("--from-runs", type=Path, metavar="RUNS_JSON",
+                        help="write the document from this runs.json instead of running")
+    parser.add_argument("--note", default="", help="a sentence added to the context (e.g. what was left out)")
+    args = parser.parse_args(argv)
+    from ldhp_tamp.planners import planner_names
+
+    command = "benchmarks/comparison.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.from_runs is not None:
+        rows, options = read_rows(args.from_runs)
+    else:
+        planners = tuple(args.planners.split(",")) if args.planners else planner_names()
+        bench_options = BenchOptions(planners=planners, seeds=args.seeds, timeout_s=args.timeout,
+                                     grace_s=args.grace, jobs=args.jobs)
+        rows_t, _files = run_bench(_scenarios(args), bench_options, args.out,
+                                   progress=lambda msg: print(f"[comparison] {msg}", file=sys.stderr, flush=True))
+        rows = list(rows_t)
+        options = json.loads((args.out / "runs.json").read_text(encoding="utf-8"))["options"]
+    doc = args.doc
+    figure_dir = doc.with_suffix("")  # docs/comparison.md -> docs/comparison/
+    figure_dir.mkdir(parents=True, exist_ok=True)
+    figs = plot_comparison(rows, figure_dir)
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    text = doc.read_text(encoding="utf-8") if doc.exists() else skeleton()
+    blocks = {"context": format_context(options, rows, command, stamp, args.note), "totals": format_totals(rows),
+              "table": format_table(rows), "findings": format_findings(rows),
+              "figure": format_figure(figs[0] if figs else None, doc)}
+    write_text_atomic(doc, replace_blocks(text, blocks))
+    print(f"wrote {doc}" + (f", {', '.join(str(f) for f in figs)}" if figs else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
