@@ -535,6 +535,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         stream=sys.stderr,
     )
     log.setLevel(logging.WARNING - 10 * min(args.verbose, 2))
+    # Dask's distributed logs every event of a sweep's cluster at INFO: with -vv only.
+    logging.getLogger("distributed").setLevel(logging.INFO if args.verbose >= 2 else logging.WARNING)
     try:
         return COMMANDS[args.command](args)
     except InputError as exc:

@@ -449,7 +449,7 @@ def _dask_client(options: SweepOptions) -> Any:
                             f"pip install 'ldhp-tamp[dask]'") from None
     if options.scheduler is not None:
         try:
-            client = Client(options.scheduler, timeout="20s")
+            client = Client(options.scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:
             raise ExecutorError(f"--scheduler {options.scheduler}: cannot connect to the Dask scheduler: "
                                 f"{exc}") from None
@@ -459,8 +459,11 @@ def _dask_client(options: SweepOptions) -> Any:
     # One cell per worker at a time: no cell waits in a busy worker's queue, and a worker
     # that dies takes only its running cell with it.
     with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
+        # The scheduler's HTTP server on a free port (no dashboard): sweeps side by side
+        # never compete for port 8787.
         with LocalCluster(n_workers=options.jobs, threads_per_worker=1, processes=True,
-                          dashboard_address=None) as cluster, Client(cluster) as client:
+                          scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"}) as cluster, \
+                Client(cluster) as client:
             yield client
 
 
