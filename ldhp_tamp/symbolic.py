@@ -189,6 +189,11 @@ def check_engine(domain: SymbolicDomain, engine: str) -> None:
     recorded = engine_names.recorded_kind(engine)
     if recorded is not None and domain.kind <= up_model.ProblemKind(recorded.features, recorded.version):
         return
+    _ask_engines(domain, engine)
+
+
+def _ask_engines(domain: SymbolicDomain, engine: str) -> None:
+    """:func:`check_engine` decided by the engines themselves (imports them all)."""
     installed = available_engines()
     if engine not in installed:
         raise EngineError(f"unknown planning engine {engine!r} for domain {domain.info.source}; "
@@ -280,10 +285,10 @@ def load_checked_domain(domain: str | Path, engine: str, registry: PrimitiveRegi
     registry
         The primitive registry, normally :data:`ldhp_tamp.primitives.REGISTRY`.
     load_engine
-        Import the engines now (unified-planning's engine factory, 0.8 s), so that a
-        solve pays for them while loading rather than in its first engine call. ``ldhp-tamp
-        check`` passes ``False``: the checks themselves need no engine whose supported
-        kind is recorded (:func:`check_engine`).
+        Import the engines now (unified-planning's engine factory, 0.8 s) and let them
+        decide, so that a solve pays for them while loading rather than in its first
+        engine call. ``ldhp-tamp check`` passes ``False``: the checks themselves need no
+        engine whose supported kind is recorded (:func:`check_engine`).
 
     Raises
     ------
@@ -295,9 +300,10 @@ def load_checked_domain(domain: str | Path, engine: str, registry: PrimitiveRegi
     """
     loaded = load_domain(domain, base)
     check_against_domain(loaded.info, registry)
-    check_engine(loaded, engine)
-    if load_engine:
-        _environment().factory.engine(engine)
+    if load_engine:  # the engines are imported now, so they decide (one that fails to import is unknown)
+        _ask_engines(loaded, engine)
+    else:
+        check_engine(loaded, engine)
     return loaded
 
 

@@ -610,3 +610,15 @@ def test_the_checks_before_a_search_import_no_engine_and_a_solve_imports_them_wh
 
     assert imported(False) == "[]"
     assert imported(True) == "['ConfigSpace', 'scipy', 'unified_planning', 'up_pyperplan']"
+
+
+def test_a_solve_asks_the_engines_themselves_while_loading(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An engine the factory does not have (its package fails to import) is unknown to a solve;
+    check, which does not import the engines, finds its package and its recorded kind."""
+    from ldhp_tamp import symbolic
+    from ldhp_tamp.primitives import REGISTRY
+
+    monkeypatch.setattr(symbolic, "available_engines", lambda: ("fast-downward",))
+    with pytest.raises(EngineError, match="unknown planning engine 'pyperplan' .*; installed: fast-downward$"):
+        symbolic.load_checked_domain("ldhp", "pyperplan", REGISTRY)
+    assert symbolic.load_checked_domain("ldhp", "pyperplan", REGISTRY, load_engine=False).info.name == "ldhp"
