@@ -7,7 +7,7 @@ Usage (from the repository root)::
         [--doc docs/comparison.md] [--from-runs DIR/runs.json]
 
 It runs ``ldhp-tamp bench`` (:func:`ldhp_tamp.bench.run_bench`) over the scenarios (default:
-every ``scenarios/*.toml``) and planners (default: every registered one,
+every ``scenarios/*.toml`` in git) and planners (default: every registered one,
 :func:`ldhp_tamp.planners.planner_names`) with seeds ``0 .. seeds-1``, each run in a worker
 process under ``--timeout`` seconds (the solver's budget; the harness stops it at
 ``timeout + grace``), every solved plan replayed in the physics simulation. The bench's
@@ -244,7 +244,8 @@ def format_figure(figure: Path | None, doc: Path) -> str:
 def _scenarios(args: argparse.Namespace) -> list[str]:
     if args.scenarios:
         return list(args.scenarios)
-    return [str(p.relative_to(REPO)) for p in sorted((REPO / "scenarios").glob("*.toml"))]
+    tracked = _git("ls-files", "scenarios/*.toml").split()  # shipped: in git, not a file someone is drafting
+    return sorted(tracked) or [str(p.relative_to(REPO)) for p in sorted((REPO / "scenarios").glob("*.toml"))]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -130,3 +130,21 @@ def test_bench_cli_refuses_an_unknown_planner(tmp_path: Path, capsys: pytest.Cap
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "nosuch" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_without_feedback_nothing_is_forbidden_and_the_symbolic_tier_replans_blind() -> None:
+    sc = load_scenario(scenarios_dir() / "gen_lift_concave11.toml")  # its first iterations fail
+    with_feedback = get_planner("ldhp")(sc, SolveOptions(max_top_iterations=2))
+    blind = get_planner("ldhp-nofeedback")(sc, SolveOptions(max_top_iterations=2))
+    assert with_feedback.plan.failure is not None and blind.plan.failure is not None
+    assert with_feedback.plan.failure.counts["forbidden"] > 0
+    assert blind.plan.failure.counts["forbidden"] == 0 and blind.plan.stats.top_iterations == 2
+    assert "after 2 top-tier iterations" in blind.reason
+
+
+def test_without_refinement_no_segment_is_bisected() -> None:
+    sc = load_scenario(scenarios_dir() / "inv_place_release.toml")  # its first pose path fails at a tip
+    refined = get_planner("ldhp")(sc, SolveOptions(max_top_iterations=1))
+    plain = get_planner("ldhp-norefine")(sc, SolveOptions(max_top_iterations=1))
+    assert refined.plan.stats.refinements > 0
+    assert plain.plan.stats.refinements == 0
