@@ -117,9 +117,12 @@ class RRTOptions:
     judge_retries : int
         Plans refused by the judge before the search gives up.
     max_failures : int
-        A node from which this many extensions have found nothing is extended no more
-        (it stays in the tree): a node stuck against an obstacle, nearest to the goal,
-        would otherwise take every goal-biased extension.
+        A node from which this many extensions have found nothing is extended toward the
+        goal no more (random targets still reach it): a node stuck against an obstacle,
+        nearest to the goal, would otherwise take every goal-biased extension.
+    forward_checks : int
+        Grasps per finger choice checked by the forward problem (the first ones, in the
+        sampled order, that execute the step).
     """
 
     max_extensions: int = 20_000
@@ -131,6 +134,7 @@ class RRTOptions:
     max_points: int = 4
     judge_retries: int = 20
     max_failures: int = 8
+    forward_checks: int = 4
 
     def __post_init__(self) -> None:
         if self.max_extensions < 1 or self.max_nodes < 2 or not 0.0 <= self.goal_bias <= 1.0:
@@ -142,7 +146,8 @@ class RRTOptions:
 #: A state piece of a sweep shorter than this (mm of vertex motion) is an instant: the
 #: contacts that separate at the start of a step make one.
 INSTANT_MM = 0.5
-#: An extension that moves the object less than this (mm of vertex motion) is no progress.
+#: An extension that moves the object less than this (mm of vertex motion) is no progress,
+#: unless it ends at its target (the last fraction of a millimetre to the goal).
 MIN_PROGRESS_MM = 0.5
 #: Relative tolerance of the mode inequalities and of "no rotation".
 _TWIST_TOL = 1e-6
@@ -408,14 +413,15 @@ def _toward(world: World, motion: Motion, target: FloatArray, radius: float, ste
     return mid if _distance(motion.poses([mid]), target, radius)[0] < dist[best] else float(s[best])
 
 
-def _step(world: World, cand: _Candidate, target: FloatArray, radius: float, step_mm: float) -> Segment | None:
+def _step(world: World, cand: _Candidate, target: FloatArray, radius: float, step_mm: float,
+          target_tol: float = 0.0) -> Segment | None:
     """The extension along ``cand`` toward ``target``: at most ``step_mm`` of vertex
     motion, stopped where it would penetrate and where the contact state changes after
     the start (a new mode); ``None`` when it makes no progress."""
     motion = cand.motion
     s_want = _toward(world, motion, target, radius, step_mm)
     speed = max(motion.vertex_speed(world), 1e-9)
-    if s_want * speed < MIN_PROGRESS_MM:
+    if s_want * speed <= 1e-9:
         return None
     sw = sweep(world, motion, s_want)
     pieces = sw.pieces
@@ -426,7 +432,9 @@ def _step(world: World, cand: _Candidate, target: FloatArray, radius: float, ste
     p_end = motion.poses([s_end])[0]
     moved = float(np.max(np.linalg.norm(world.object_vertices(Pose.from_array(p_end))
                                         - world.object_vertices(motion.start), axis=1)))
-    if not np.all(np.isfinite(p_end)) or moved < MIN_PROGRESS_MM:
+    if not np.all(np.isfinite(p_end)) or moved <= 1e-9:
+        return None
+    if moved < MIN_PROGRESS_MM and _distance(p_end[None], target, radius)[0] > target_tol:
         return None
     params = dict(cand.params)
     if motion.kind is MotionKind.TRANSLATE:
@@ -441,6 +449,9 @@ def _step(world: World, cand: _Candidate, target: FloatArray, radius: float, ste
 # The tree
 # --------------------------------------------------------------------------------------
 
+
+#: Grasps a change may go to, found per extension before the changes are checked.
+CHANGE_TARGETS = 4
 
 #: The root's grasp under ``start_grasp = "any"``: any grasp that holds the object there.
 ANY_GRASP = -1
@@ -475,6 +486,8 @@ class _Stats:
     grasp_time: float = 0.0
     no_motion: int = 0
     no_grasp: int = 0
+    ambiguous: int = 0  # extensions whose step the forward problem refused
+    judge_time: float = 0.0
     states: set[str] = field(default_factory=set)
     best: float = math.inf  # the nearest any node came to the goal
 
@@ -552,10 +565,13 @@ class _Search:
         return np.array([x0 + u[0] * (x1 - x0), y0 + u[1] * (y1 - y0), -math.pi + 2 * math.pi * u[2]])
 
     def nearest(self, q: FloatArray) -> int | None:
-        """The live node nearest ``q`` that is not exhausted (``None``: there is none)."""
+        """The live node nearest ``q``, toward the goal one that is not exhausted
+        (``None``: there is none)."""
         n = len(self.nodes)
         d = _distance(self.poses[:n], q, self.radius)
-        d[~self.alive[:n] | (self.failures[:n] >= self.rrt.max_failures)] = np.inf
+        d[~self.alive[:n]] = np.inf
+        if np.array_equal(q, self.goal):
+            d[self.failures[:n] >= self.rrt.max_failures] = np.inf
         i = int(np.argmin(d))
         return i if np.isfinite(d[i]) else None
 
@@ -581,7 +597,7 @@ class _Search:
         for c in order:
             budget.check(self.deadline, f"contact-rrt, extension {self.stats.extensions}")
             t0 = budget.clock()
-            seg = _step(self.world, cands[int(c)], q, self.radius, self.rrt.step_mm)
+            seg = _step(self.world, cands[int(c)], q, self.radius, self.rrt.step_mm, self.rrt.goal_tol_mm)
             self.stats.motion_time += budget.clock() - t0
             if seg is None:
                 continue
@@ -596,6 +612,33 @@ class _Search:
             return self._add(_Node(end.copy(), g, i, seg, changes))
         self.stats.no_motion += not cands
         return None
+
+    def _unambiguous(self, seg: Segment, g: int) -> bool:
+        """The forward problem of the judge (:func:`ldhp_tamp.executability.forward_check`)
+        on the edge's MoveObject step alone: carrying ``g`` along ``seg`` makes the planned
+        motion and no other (a fingertip that could let go while the object stays put
+        does not push it). Checked at once so that no subtree grows on a step the judge
+        would refuse."""
+        t0 = budget.clock()
+        plan = Plan(PLAN_FORMAT, self.scenario.name, self.scenario.sha256, PlanStatus.SOLVED,
+                    (self.planner.move_step(seg, g),), PlanStats(engine=ENGINE))
+        ok = forward_check(plan, self.scenario).ok
+        self.stats.judge_time += budget.clock() - t0
+        self.stats.ambiguous += not ok
+        return ok
+
+    def _carries(self, seg: Segment, cand: IntArray, want: int) -> IntArray:
+        """The first ``want`` grasps of ``cand`` (in its order) that execute ``seg``
+        (:meth:`_executes`) unambiguously (:meth:`_unambiguous`, tried on at most
+        ``forward_checks`` of them)."""
+        ordered = cand[np.isin(cand, self._executes(seg, cand))]
+        out: list[int] = []
+        for g in ordered[: self.rrt.forward_checks]:
+            if self._unambiguous(seg, int(g)):
+                out.append(int(g))
+                if len(out) >= want:
+                    break
+        return np.array(out, dtype=np.int64)
 
     def _executes(self, seg: Segment, cand: IntArray) -> IntArray:
         """The grasps of ``cand`` that execute ``seg`` (G_m restricted to them)."""
@@ -622,13 +665,12 @@ class _Search:
         g = node.grasp
         pose = Pose.from_array(node.pose)
         state = seg.from_state.name
-        if g > NO_CONTACT and self._executes(seg, np.array([g])).size:
+        if g > NO_CONTACT and self._carries(seg, np.array([g]), 1).size:
             return g, ()
         ok = self._gt(i) & (self.grasps.n_touching >= 1)
         if g == ANY_GRASP:  # the held start: any grasp that holds the object there
             held = np.flatnonzero(self.ctx.holds(node.pose, ok) & ok)
-            tried = self._sample(self.rng.permutation(held))
-            chosen = tried[np.isin(tried, self._executes(seg, tried))]
+            chosen = self._carries(seg, self._sample(self.rng.permutation(held)), 1)
             return (int(chosen[0]), ()) if chosen.size else None
         # an AdjustGrasp change with the object held (pivot, slide, close, open to one finger, flip)
         if g > NO_CONTACT:
@@ -655,7 +697,7 @@ class _Search:
         executes ``seg`` and passes the primitive's check."""
         if g == NO_CONTACT:  # approach-contact reaches every grasp: sample first, then propose
             members = np.zeros_like(ok)
-            members[self._executes(seg, self._sample(self.rng.permutation(np.flatnonzero(ok))))] = True
+            members[self._carries(seg, self._sample(self.rng.permutation(np.flatnonzero(ok))), CHANGE_TARGETS)] = True
             ok = members
             if not ok.any():
                 return None
@@ -669,7 +711,7 @@ class _Search:
         if not proposals:
             return None
         dst = np.unique(np.concatenate([e.dst for _, e in proposals]))
-        good = dst if g == NO_CONTACT else self._executes(seg, self._sample(self.rng.permutation(dst)))
+        good = dst if g == NO_CONTACT else self._carries(seg, self._sample(self.rng.permutation(dst)), CHANGE_TARGETS)
         if not good.size:
             return None
         # every proposed edge into a good grasp, in a random order, checked one primitive at a time
@@ -779,9 +821,10 @@ def _plan_stats(search: _Search | None, stats: _Stats, start: float) -> PlanStat
                      grasp_graph_edges=max(nodes - 1, 0), top_iterations=stats.extensions, refinements=0,
                      feasibility_checks=stats.feasibility_checks,
                      time_s={"symbolic": 0.0, "streams": round(stats.motion_time, 4),
-                             "grasp_graph": round(stats.grasp_time, 4), "total": round(budget.clock() - start, 4)},
+                             "grasp_graph": round(stats.grasp_time, 4), "forward": round(stats.judge_time, 4),
+                             "total": round(budget.clock() - start, 4)},
                      extra={"planner": ENGINE, "tree_nodes": nodes, "extensions": stats.extensions,
-                            "judge_rejections": stats.judge_rejections,
+                            "judge_rejections": stats.judge_rejections, "ambiguous_steps": stats.ambiguous,
                             "closest_to_goal_mm": None if not math.isfinite(stats.best) else round(stats.best, 4)})
 
 
@@ -836,8 +879,8 @@ def _run(search: _Search, scenario: Scenario, options: SolveOptions, stats: _Sta
         stats.extensions += 1
         budget.check(search.deadline, f"contact-rrt, extension {stats.extensions}")
         new = search.extend(search.target())
-        if new is None and search.nearest(search.goal) is None:
-            break  # every node is exhausted or pruned
+        if new is None and not search.alive.any():
+            break  # every node is pruned
         if new is None or not search.at_goal(new):
             continue
         end = search.finish(new)
@@ -866,7 +909,7 @@ def _run(search: _Search, scenario: Scenario, options: SolveOptions, stats: _Sta
     elif len(search.nodes) >= rrt.max_nodes:
         within = f"within {rrt.max_nodes} tree nodes"
     else:
-        within = f"after {stats.extensions} extensions: every node is exhausted ({rrt.max_failures} failed extensions)"
+        within = f"after {stats.extensions} extensions: the judge refused every node's path"
     reason = (f"contact-rrt: no path to the goal {within} ({len(search.nodes)} nodes, "
               f"{len(stats.states)} contact states visited, nearest {stats.best:.1f} mm from the goal"
               + (f"; {stats.judge_rejections} plan(s) refused by the judge" if stats.judge_rejections else "") + ")")
