@@ -144,7 +144,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
         if not quiet:
             print(f"[ldhp-tamp] {msg}", file=sys.stderr, flush=True)
 
-    result = solve(scenario, options, progress=progress)
+    if args.planner == "ldhp":
+        result = solve(scenario, options, progress=progress)
+    else:  # another planner of ldhp_tamp.planners (contact-rrt, a variant, cmd:...), judged alike
+        from ldhp_tamp.planners import get_planner
+
+        result = get_planner(args.planner)(scenario, options)
     try:
         write_plan(result.plan, out)
     except OSError as exc:
@@ -398,6 +403,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
     p.add_argument("--out", metavar="PLAN", help="plan JSON to write (default: <scenario name>-plan.json)")
     p.add_argument("--engine", metavar="NAME", help="unified-planning engine (default: the scenario's, pyperplan)")
+    p.add_argument("--planner", default="ldhp", metavar="NAME",
+                   help="the planner (default ldhp): ldhp, ldhp-norefine, ldhp-nofeedback, contact-rrt, or "
+                        "cmd:'PROGRAM {scenario} {plan}' (as bench --planners)")
     p.add_argument("--seed", type=int, metavar="N", help="random seed (default: the scenario's)")
     p.add_argument("--emit-pddl", metavar="DIR", help="write the domain and one problem per top-tier iteration")
     p.add_argument("--timeout", type=_seconds, metavar="SECONDS",

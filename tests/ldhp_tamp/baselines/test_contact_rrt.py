@@ -151,3 +151,15 @@ def test_options_are_checked():
         RRTOptions(goal_bias=1.5)
     with pytest.raises(ValueError):
         RRTOptions(max_nodes=1)
+
+
+def test_cli_solve_with_the_planner(tmp_path, capsys):
+    from ldhp_tamp.cli import EXIT_BAD_INPUT, EXIT_OK, main
+    from ldhp_tamp.plan import read_plan
+
+    out = tmp_path / "plan.json"
+    assert main(["solve", str(PICK), "--planner", "contact-rrt", "--seed", "0", "--out", str(out), "-q"]) == EXIT_OK
+    plan = read_plan(out)
+    assert plan.stats.engine == ENGINE and validate_plan(plan, load_scenario(PICK)).valid
+    assert main(["solve", str(PICK), "--planner", "no-such-planner", "--out", str(out), "-q"]) == EXIT_BAD_INPUT
+    assert "unknown planner 'no-such-planner'" in capsys.readouterr().err
