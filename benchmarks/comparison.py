@@ -16,8 +16,8 @@ files (``runs.csv``, ``runs.json``, ``summary.md``, ``comparison.png/.svg``) go 
 
 Only the blocks between ``<!-- BEGIN generated: NAME -->`` and ``<!-- END generated: NAME -->``
 of the document are replaced (``context``, ``totals``, ``table``, ``findings``,
-``figure``); the prose around them is kept. ``--from-runs`` rewrites the blocks from an
-earlier run's ``runs.json`` without running anything.
+``figure``); the prose around them is kept. ``--from-runs`` rewrites the blocks from earlier
+runs' ``runs.json`` files (merged) without running anything.
 """
 
 from __future__ import annotations
@@ -157,7 +157,7 @@ def format_totals(rows: Sequence[BenchRow]) -> str:
 
 
 def format_table(rows: Sequence[BenchRow]) -> str:
-    scenarios = list(dict.fromkeys(r.scenario for r in rows))
+    scenarios = sorted({r.scenario for r in rows})
     planners = list(dict.fromkeys(r.planner for r in rows))
     lines = ["Success: solved runs over seeds, with the 95 % Wilson interval; the other columns are over the "
              "solved runs (medians; time with its quartiles). Regrasps: AdjustGrasp steps that change the grasp "
@@ -258,15 +258,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--scenarios", nargs="+", metavar="FILE", help="default: every scenarios/*.toml")
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "out" / "comparison")
     parser.add_argument("--doc", type=Path, default=DOC)
-    parser.add_argument("--from-runs", type=Path, metavar="RUNS_JSON",
-                        help="write the document from this runs.json instead of running")
+    parser.add_argument("--from-runs", type=Path, nargs="+", metavar="RUNS_JSON",
+                        help="write the document from these runs.json files (merged; a later file's row "
+                             "replaces an earlier one of the same run) instead of running")
     parser.add_argument("--note", default="", help="a sentence added to the context (e.g. what was left out)")
     args = parser.parse_args(argv)
     from ldhp_tamp.planners import planner_names
 
     command = "benchmarks/comparison.py " + " ".join(argv if argv is not None else sys.argv[1:])
     if args.from_runs is not None:
-        rows, options = read_rows(args.from_runs)
+        merged: dict[tuple, BenchRow] = {}
+        for path in args.from_runs:
+            part, options = read_rows(path)
+            merged.update({(r.scenario, r.planner, r.engine, r.samples_per_edge, r.seed): r for r in part})
+        rows = list(merged.values())
     else:
         planners = tuple(args.planners.split(",")) if args.planners else planner_names()
         bench_options = BenchOptions(planners=planners, seeds=args.seeds, timeout_s=args.timeout,
