@@ -437,16 +437,27 @@ def run_isolated(task: CellTask[C, R], cell: C, hard_limit_s: float | None) -> R
     return result if task.with_wall is None else task.with_wall(result, wall)
 
 
+def _import_distributed() -> Any:
+    """The ``distributed`` package; :class:`ExecutorError` if it is not installed."""
+    chosen = logging.getLogger("distributed").level  # the application's choice, if any
+    try:
+        import distributed
+    except ImportError as exc:
+        raise ExecutorError(f"--executor dask needs the 'distributed' package ({exc}); install it with "
+                            f"pip install 'ldhp-tamp[dask]'") from None
+    if chosen != logging.NOTSET:  # the first import sets the level from dask's configuration
+        logging.getLogger("distributed").setLevel(chosen)
+    return distributed
+
+
 @contextlib.contextmanager
 def _dask_client(options: SweepOptions) -> Any:
     """A client of ``options.scheduler``, or of a ``LocalCluster`` of ``options.jobs``
     single-threaded worker processes, closed (workers and all) on exit."""
-    try:
-        import dask
-        from distributed import Client, LocalCluster
-    except ImportError as exc:
-        raise ExecutorError(f"--executor dask needs the 'distributed' package ({exc}); install it with "
-                            f"pip install 'ldhp-tamp[dask]'") from None
+    distributed = _import_distributed()
+    import dask
+
+    Client, LocalCluster = distributed.Client, distributed.LocalCluster
     if options.scheduler is not None:
         try:
             client = Client(options.scheduler, timeout="10s")
@@ -469,9 +480,9 @@ def _dask_client(options: SweepOptions) -> Any:
 
 def _run_dask(cells: Sequence[C], task: CellTask[C, R], options: SweepOptions,
               on_result: Callable[[int, R], None]) -> None:
-    from distributed import as_completed
-
     with _dask_client(options) as client:
+        from distributed import as_completed
+
         workers = len(client.scheduler_info().get("workers", {}))
         where = options.scheduler or "a LocalCluster on this machine"
         log.info("dask: %d cells on %s (%d workers)", len(cells), where, workers)

@@ -16,6 +16,7 @@ import faulthandler
 import io
 import json
 import logging
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -28,7 +29,7 @@ from ldhp_tamp import bench, resources
 from ldhp_tamp.ablate import AblationOptions, ablate, read_csv
 from ldhp_tamp.bench import BenchOptions, BenchStatus, plan_runs, run_all, run_bench
 from ldhp_tamp.cli import EXIT_BAD_INPUT, main
-from ldhp_tamp.errors import InputError
+from ldhp_tamp.errors import ExecutorError, InputError
 from ldhp_tamp.sweep import SweepOptions, run_cells
 from sweep_cells import TOY, crash_seed_1, crash_the_baseline, toy_run
 
@@ -155,6 +156,12 @@ def test_sweep_options_are_checked() -> None:
     with pytest.raises(InputError, match="hard limit"):
         SweepOptions(hard_limit_s=0)
     assert run_cells([], TOY, SweepOptions(executor="dask")) == []  # nothing to run: no cluster
+
+
+def test_dask_without_distributed_is_an_executor_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if not installed
+    with pytest.raises(ExecutorError, match=r"pip install 'ldhp-tamp\[dask\]'"):
+        run_cells(["a"], TOY, SweepOptions(executor="dask"))
 
 
 @pytest.mark.parametrize("argv, named", [
