@@ -13,7 +13,8 @@ Each MoveObject primitive moves the object along a one-parameter family of poses
   while it rotates (corner guidance); ``s`` is the orientation change (radians) in the
   chosen sense. For each orientation, every kept contact is one linear equation in the
   translation ``t`` (see :func:`contact_line`), solved as a 2x2 system.
-- ``air-move`` uses :func:`translate` (free-space straight line; waypoints chain them).
+- ``air-move`` chains :func:`translate` (free-space straight lines) and
+  :func:`rotate_about` the object's centre of mass (turns in the air).
 
 :func:`sweep` walks a motion with a small step, identifies the contact state at every
 sample and cuts the walk into pieces of constant state, stopping where the object would

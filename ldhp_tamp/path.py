@@ -47,12 +47,20 @@ class Segment:
     """The segment a bisection cut this one from; its dense samples are then a slice of
     the parent's (``span``), so what was learnt of the parent carries over."""
     span: tuple[int, int] | None = None  # (first, last) index into the parent's samples
+    turn_step: float | None = None
+    """For a rotation (``s`` an angle): the largest turn (radians) between samples, on top
+    of the vertex step. An air-move's turn sets it: the grasp must hold the object at every
+    orientation, and a small object's vertices move little per degree."""
 
     @cached_property
     def parameter_values(self) -> FloatArray:
         if self.parent is not None and self.span is not None:
             return self.parent.parameter_values[self.span[0]:self.span[1] + 1]
-        return dense_parameters(self.world, self.motion, self.s0, self.s1, WAYPOINT_STEP)
+        values = dense_parameters(self.world, self.motion, self.s0, self.s1, WAYPOINT_STEP)
+        if self.turn_step is not None and self.motion.kind is MotionKind.ROTATE:
+            n = max(1, int(math.ceil(abs(self.s1 - self.s0) / self.turn_step)))
+            values = np.union1d(values, np.linspace(self.s0, self.s1, n + 1))
+        return values
 
     @cached_property
     def poses(self) -> FloatArray:

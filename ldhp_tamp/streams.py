@@ -29,6 +29,7 @@ from geometry.tolerances import CONTACT_TOL
 from ldhp_tamp import budget
 from ldhp_tamp.contact_graph import PlanningContext
 from ldhp_tamp.path import Segment
+from ldhp_tamp.primitives.move_object import MARGIN_MM, carriers
 from ldhp_tamp.primitives.registry import DomainInfo, Family, PrimitiveRegistry, Transition
 
 log = logging.getLogger(__name__)
@@ -326,7 +327,10 @@ class PathSearch:
             pre = tuple(replace(a, step=k) for a in tail)
             if pre:
                 pose = pre[-1].end
-        return _Level(k, prefix, pre, self._candidates(t, pose))
+        after = self.transitions[k + 1] if k + 1 < len(self.transitions) else None
+        lift_next = after is not None and after.action == "air-move" and after.to_state.is_free \
+            and after.from_state == t.to_state and not t.to_state.is_free
+        return _Level(k, prefix, pre, self._candidates(t, pose, lift_next))
 
     def _finish(self, pose: Pose, segments: tuple[Segment, ...]) -> PosePath | None:
         """The complete path: ``segments`` and, when the goal is a contact pose, the
@@ -363,13 +367,52 @@ class PathSearch:
                 for s in impl.sample(self.ctx, t.from_state, t.to_state, pose,  # type: ignore[attr-defined]
                                      self.rng, self.limit)]
 
-    def _candidates(self, t: Transition, pose: Pose) -> Iterator[tuple[Segment, ...]]:
+    def _lift_offs(self, t: Transition, samples: list[tuple[Segment, ...]]) -> list[tuple[Segment, ...]]:
+        """The samples of ``t`` with their last motion ended instead where the most grasps
+        can lift the object off and carry it to the goal's orientation
+        (:func:`ldhp_tamp.primitives.move_object.carriers`, the statics of the hold at every
+        orientation of the turn), on a grid ``LIFT_OFF_STEP_MM`` of vertex motion apart
+        over the stretch of that motion in ``t.to_state`` (less ``MARGIN_MM`` at its
+        ends): the best ``limit`` of them, most carriers first, none without a carrier.
+        The next step lifts the object off where this one leaves it, and the goal-ranked
+        ends may all miss the window where a carrying grasp both fits beside the
+        environment and can be reached (task 1 held flat in the air: the tip's ends at
+        1.4, 45 and 88.6 degrees, the lever pinch that carries the block to flat from 66
+        to 82 degrees only)."""
+        ctx = self.ctx
+        if ctx.grasps is None:
+            return []
+        scored: list[tuple[int, float, int, tuple[Segment, ...]]] = []
+        done: set[tuple[object, float]] = set()
+        for moves in samples:
+            seg = moves[-1]
+            if seg.to_state != t.to_state or (seg.motion, seg.s0) in done:
+                continue
+            done.add((seg.motion, seg.s0))
+            key = ("lift-offs", seg.motion, seg.s0, t.to_state)
+            if key not in ctx.memo:
+                ctx.memo[key] = _lift_off_values(ctx, seg, t.to_state)
+            for value, count in ctx.memo[key]:
+                end = seg.motion.poses([value])
+                param = "travel" if seg.motion.kind is MotionKind.TRANSLATE else "angle"
+                length = abs(value - seg.s0)
+                params = dict(seg.parameters, **{param: round(length if param == "travel" else math.degrees(length), 6)})
+                moved = replace(seg, s1=float(value), parameters=params)
+                scored.append((-count, float(ctx.goal_distance(end)[0]), len(scored), moves[:-1] + (moved,)))
+        scored.sort(key=lambda x: x[:3])
+        return [moves for _, _, _, moves in scored[:self.limit]]
+
+    def _candidates(self, t: Transition, pose: Pose, lift_next: bool = False) -> Iterator[tuple[Segment, ...]]:
         """A transition's stream: the primitive's own samples from ``pose``; when it has
         none, samples from poses reached by an in-state motion (:func:`reposition`, at
-        most ``MAX_REPOSITIONS`` of them), ranked by the distance of their end pose to T'_g."""
+        most ``MAX_REPOSITIONS`` of them), ranked by the distance of their end pose to T'_g.
+        Before a lift out of the state the transition enters (``lift_next``), its samples
+        ended where the object is best lifted off come first (:meth:`_lift_offs`)."""
         impl = self.registry.implementation(t.action)
         own = self._sample(impl, t, pose)
         if own:
+            if lift_next:
+                yield from self._lift_offs(t, own)
             yield from own
         if own is None or own or t.from_state.is_free:
             return
@@ -389,6 +432,34 @@ class PathSearch:
         scored.sort(key=lambda x: (x[0], x[1]))
         for _, _, moves in scored[:self.limit]:
             yield moves
+
+
+#: Grid step (mm of vertex motion) of the lift-off poses looked at along a motion before a lift.
+LIFT_OFF_STEP_MM = 10.0
+
+
+def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) -> list[tuple[float, int]]:
+    """``(parameter, carriers)`` along ``seg``'s motion where it stays in ``state``, on the
+    grid of :meth:`PathSearch._lift_offs`, for the values with a carrier."""
+    motion = seg.motion
+    s_max = ctx.reach if motion.kind is MotionKind.TRANSLATE else math.pi
+    sw = sweep(ctx.world, motion, s_max)
+    piece = next((p for p in sw.pieces if p.state == state and p.s0 <= seg.s1 <= p.s1 + 1e-12), None)
+    if piece is None:
+        return []
+    speed = max(motion.vertex_speed(ctx.world), 1e-9)
+    a, b = piece.s0, piece.s1
+    margin = min(MARGIN_MM / speed, (b - a) / 4.0)
+    n = int(math.ceil((b - a - 2.0 * margin) * speed / LIFT_OFF_STEP_MM))
+    if n < 1:
+        return []
+    out = []
+    for value, pose in zip(np.linspace(a + margin, b - margin, n + 1),
+                           motion.poses(np.linspace(a + margin, b - margin, n + 1))):
+        found = carriers(ctx, Pose.from_array(pose))
+        if found is not None and found.size:
+            out.append((float(value), int(found.size)))
+    return out
 
 
 @dataclass(eq=False)

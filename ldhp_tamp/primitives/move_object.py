@@ -18,7 +18,6 @@ for ``tip``, edge directions for ``push``, pairs of kept contacts and senses for
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 from typing import TYPE_CHECKING, Any, Iterator
@@ -26,7 +25,8 @@ from typing import TYPE_CHECKING, Any, Iterator
 import numpy as np
 
 from geometry.contacts import contact_points, principal_contacts
-from geometry.grasps import motion_conditioned, pose_conditioned
+from geometry.collision import gripper_env_overlap
+from geometry.grasps import motion_conditioned
 from geometry.features import FREE, Contact, ContactKind, ContactState
 from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, kept_contact_holds, rotate_about, sweep, translate, two_contact
 from geometry.poses import Pose, wrap_angle
@@ -325,6 +325,10 @@ AIR_CLEARANCE_MM = 10.0
 #: How far (mm) the admissibility sweeps of lifts and placements go: enough to leave a
 #: resting contact (CONTACT_TOL) several times over.
 AIR_PROBE_MM = 5.0
+#: Largest turn (degrees) between the samples of an air-move's rotation, on top of the
+#: 4 mm vertex step: the carried grasp is checked at every sample, and whether it holds
+#: depends on the orientation (a small object's vertices move little per degree).
+AIR_TURN_STEP_DEG = 2.0
 
 
 def _env_top(world: World, x0: float, x1: float) -> float:
@@ -357,20 +361,55 @@ def _same_orientation(ctx: PlanningContext, a: Pose, b: Pose) -> bool:
     return abs(float(wrap_angle(a.theta - b.theta))) * ctx.world.object.polygon.radius <= AIR_MOVE_ANGLE_MM
 
 
+def _centre(world: World, pose: Pose) -> np.ndarray:
+    """The object's centre of mass in the world at ``pose``: what an air-move turns about."""
+    return pose.apply(world.object.com[None])[0]
+
+
+def _clear_height(ctx: PlanningContext, pose: Pose, target: Pose) -> float:
+    """How far (mm) to raise the object from ``pose`` so that it, and the gripper below
+    it, clear the environment by AIR_CLEARANCE_MM between here and ``target``: the object
+    as it is when the orientations agree, else the disc it sweeps turning about its centre
+    of mass, grown by the gripper's reach (the gripper turns with it)."""
+    world = ctx.world
+    drop = _gripper_drop(world)
+    if _same_orientation(ctx, pose, target):
+        here, there = world.object_vertices(pose), world.object_vertices(target)
+        x0 = float(min(here[:, 0].min(), there[:, 0].min()))
+        x1 = float(max(here[:, 0].max(), there[:, 0].max()))
+        return _env_top(world, x0, x1) + AIR_CLEARANCE_MM + drop - float(here[:, 1].min())
+    r = world.object.length_scale + drop
+    c, t = _centre(world, pose), _centre(world, target)
+    top = _env_top(world, float(min(c[0], t[0]) - r), float(max(c[0], t[0]) + r))
+    return top + AIR_CLEARANCE_MM + r - float(c[1])
+
+
+def _waypoints(a: Pose, b: Pose) -> list[list[float]]:
+    return [list(a.to_degrees()), list(b.to_degrees())]
+
+
 @REGISTRY.register("air-move", Family.MOVE_OBJECT)
 class AirMove:
     """Free-space motion between contact and non-contact (paper, Table I: params are
-    waypoints; the object touches nothing in between). Translations only: the model has
-    no rotation in the air.
+    waypoints in T, object poses; the object touches nothing in between and the gripper
+    moves rigidly with it, the grasp fixed). A move is a chain of legs, each a translation
+    or a turn about the object's centre of mass, every one swept against the environment;
+    the bottom tier checks the carried grasp at every sample (collision-free, equilibrium
+    of gravity and the finger contacts at each orientation).
 
     - Step 1 and Sub-step 3: from a start pose in the air down to its contact pose T'_0,
       and from the goal contact pose T'_g up to a goal pose in the air (one straight
       translation each, collision-free by construction of the contact poses).
-    - Lift and place, when the goal is a contact pose: out of a contact state straight up
-      (``s -> free``), and from the air onto the goal (``free -> goal state``): over to
-      above the goal at the height reached, then straight down onto it. A lift is only
-      useful at the goal's orientation (the placement cannot rotate), so it is admitted
-      from the states with a witness at that orientation.
+    - Lifts (``s -> free``) from every state with a witness pose that a translation
+      straight up takes into free space and that a grasp holding the object in the air at
+      that orientation fits (:func:`_carriable`), at whatever orientation. With the goal
+      in the air the lift carries the object to it: straight up to a clearance height,
+      a turn about the centre of mass to the goal's orientation, a straight translation
+      to the goal. With the goal in contact, the lift ends at the clearance height.
+    - Placements (``free -> goal state``), when the goal is a contact pose a translation
+      straight up from which goes into free space: from the pose in the air, a turn to the
+      goal's orientation (raised first if it would not clear), over to above the goal,
+      then straight down onto it.
     """
 
     name = "air-move"
@@ -381,17 +420,17 @@ class AirMove:
             pairs.add((FREE, ctx.start_contact.state))
         if ctx.goal_free:
             pairs.add((ctx.goal_contact.state, FREE))
-            return pairs
         up = (0.0, 1.0)
-        holders = functools.cache(lambda: _air_holders(ctx, ctx.goal.theta))  # only if a pose needs it
-        if _leaves_to_free(ctx, ctx.goal, ctx.goal_contact.state, up) and _carriable(ctx, ctx.goal, holders()):
+        if not ctx.goal_free and _leaves_to_free(ctx, ctx.goal, ctx.goal_contact.state, up) \
+                and _carriable(ctx, ctx.goal):
             pairs.add((FREE, ctx.goal_contact.state))  # placed from above
+        if not ctx.goal_free and (FREE, ctx.goal_contact.state) not in pairs:
+            return pairs  # free space leads nowhere nearer the goal: no lift is worth admitting
         for state in ctx.states:
-            if state.is_free:
+            if state.is_free or (state, FREE) in pairs:
                 continue
             budget.check(ctx.deadline, "the setup (air-move transitions)")
-            if any(_same_orientation(ctx, w, ctx.goal) and _leaves_to_free(ctx, w, state, up)
-                   and _carriable(ctx, w, holders()) for w in ctx.witness_poses(state)):
+            if any(_leaves_to_free(ctx, w, state, up) and _carriable(ctx, w) for w in _lift_witnesses(ctx, state)):
                 pairs.add((state, FREE))  # lifted straight up
         return pairs
 
@@ -405,69 +444,123 @@ class AirMove:
             seg = self._straight(ctx, from_state, to_state, start_pose, ctx.goal)
             if seg is not None:
                 yield seg
+            elif not from_state.is_free and _carriable(ctx, start_pose):
+                legs = self._carry(ctx, from_state, start_pose, ctx.goal)
+                if legs is not None:
+                    yield legs
+            return
         if ctx.goal_free:
             return
         if from_state.is_free and to_state == ctx.goal_contact.state:
             legs = self._place(ctx, to_state, start_pose)
             if legs is not None:
                 yield legs
-        elif to_state.is_free and not from_state.is_free:
-            seg = self._lift(ctx, from_state, start_pose)
+        elif to_state.is_free and not from_state.is_free and _carriable(ctx, start_pose):
+            seg = self._up(ctx, from_state, start_pose, _clear_height(ctx, start_pose, ctx.goal))
             if seg is not None:
                 yield seg
 
     def _straight(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
                   start_pose: Pose, target: Pose) -> Segment | None:
-        """The Step-1 translation to ``target``."""
+        """The Step-1 translation to ``target`` (at the same orientation)."""
         d = np.array([target.x - start_pose.x, target.y - start_pose.y])
         dist = float(np.linalg.norm(d))
         # An in-state alignment reaches T'_g's orientation to within AIR_MOVE_ANGLE_MM of
         # vertex motion, not exactly: a translation then ends that close to the goal.
         if not _same_orientation(ctx, start_pose, target) or dist < 1e-9:
-            if dist >= 1e-9:
-                log.debug("air-move needs a rotation of %.4f degrees; only translations are modelled",
-                          math.degrees(abs(float(wrap_angle(target.theta - start_pose.theta)))))
             return None
         return Segment(self.name, from_state, to_state, translate(start_pose, d), 0.0, dist, ctx.world,
-                       {"waypoints": [list(start_pose.to_degrees()), list(target.to_degrees())],
-                        "travel": round(dist, 6)})
+                       {"waypoints": _waypoints(start_pose, target), "travel": round(dist, 6)})
 
-    def _lift(self, ctx: PlanningContext, from_state: ContactState, start_pose: Pose) -> Segment | None:
-        """Straight up until the object, and the gripper below it, clear the environment
-        between here and the goal."""
-        if not _same_orientation(ctx, start_pose, ctx.goal):
-            return None
-        here, there = ctx.world.object_vertices(start_pose), ctx.world.object_vertices(ctx.goal)
-        x0 = float(min(here[:, 0].min(), there[:, 0].min()))
-        x1 = float(max(here[:, 0].max(), there[:, 0].max()))
-        clear = _env_top(ctx.world, x0, x1) + AIR_CLEARANCE_MM + _gripper_drop(ctx.world)
-        h = max(clear - float(here[:, 1].min()), AIR_PROBE_MM)
+    def _up(self, ctx: PlanningContext, from_state: ContactState, start_pose: Pose, height: float) -> Segment | None:
+        """Straight up by ``height`` (at least AIR_PROBE_MM) out of ``from_state`` into
+        free space (``from_state`` free: staying in it)."""
+        h = max(height, AIR_PROBE_MM)
         m = translate(start_pose, (0.0, 1.0))
         sw = sweep(ctx.world, m, h)
         if sw.end is not SweepEnd.LIMIT or sw.states[-1] != FREE or any(
                 st not in (from_state, FREE) for st in sw.states):
             return None
-        end = m.pose(h)
         return Segment(self.name, from_state, FREE, m, 0.0, h, ctx.world,
-                       {"waypoints": [list(start_pose.to_degrees()), list(end.to_degrees())],
-                        "travel": round(h, 6), "lift": True})
+                       {"waypoints": _waypoints(start_pose, m.pose(h)), "travel": round(h, 6), "lift": True})
+
+    def _turn(self, ctx: PlanningContext, start_pose: Pose, theta: float) -> Segment | None:
+        """In free space, a turn about the object's centre of mass to orientation
+        ``theta``: the shorter way if it touches nothing, else the longer way."""
+        d = float(wrap_angle(theta - start_pose.theta))
+        centre = _centre(ctx.world, start_pose)
+        for sense, angle in ((1 if d >= 0 else -1, abs(d)), (-1 if d >= 0 else 1, 2.0 * math.pi - abs(d))):
+            m = rotate_about(start_pose, centre, sense)
+            sw = sweep(ctx.world, m, angle)
+            if sw.end is SweepEnd.LIMIT and all(st.is_free for st in sw.states):
+                end = m.pose(angle)
+                return Segment(self.name, FREE, FREE, m, 0.0, angle, ctx.world,
+                               {"waypoints": _waypoints(start_pose, end), "angle": round(math.degrees(angle), 6),
+                                "sense": _sense_name(sense),
+                                "centre": [round(float(centre[0]), 6), round(float(centre[1]), 6)]},
+                               turn_step=math.radians(AIR_TURN_STEP_DEG))
+        return None
+
+    def _over(self, ctx: PlanningContext, start_pose: Pose, target: Pose) -> Segment | None:
+        """In free space, a straight translation to ``target``'s position."""
+        d = np.array([target.x - start_pose.x, target.y - start_pose.y])
+        dist = float(np.linalg.norm(d))
+        m = translate(start_pose, d)
+        sw = sweep(ctx.world, m, dist)
+        if sw.end is not SweepEnd.LIMIT or any(not st.is_free for st in sw.states):
+            return None
+        end = Pose(target.x, target.y, start_pose.theta)
+        return Segment(self.name, FREE, FREE, m, 0.0, dist, ctx.world,
+                       {"waypoints": _waypoints(start_pose, end), "travel": round(dist, 6)})
+
+    def _carry(self, ctx: PlanningContext, from_state: ContactState, start_pose: Pose,
+               target: Pose) -> tuple[Segment, ...] | None:
+        """Lift off and carry to ``target`` in the air: straight up to the clearance
+        height, a turn to ``target``'s orientation, a straight translation to it."""
+        up = self._up(ctx, from_state, start_pose, _clear_height(ctx, start_pose, target))
+        if up is None:
+            return None
+        legs = [up]
+        if not _same_orientation(ctx, up.end, target):
+            turn = self._turn(ctx, up.end, target.theta)
+            if turn is None:
+                return None
+            legs.append(turn)
+        here = legs[-1].end
+        if math.hypot(target.x - here.x, target.y - here.y) > 1e-9:
+            over = self._over(ctx, here, target)
+            if over is None:
+                return None
+            legs.append(over)
+        return tuple(legs)
 
     def _place(self, ctx: PlanningContext, to_state: ContactState, start_pose: Pose) -> tuple[Segment, ...] | None:
-        """Over to above the goal at this height, then straight down onto it."""
+        """From the air onto the goal: a turn to its orientation (raised first to the
+        clearance height if below it), over to above the goal, then straight down."""
         goal = ctx.goal
-        if not _same_orientation(ctx, start_pose, goal) or start_pose.y <= goal.y:
-            return None
         legs: list[Segment] = []
-        dx = goal.x - start_pose.x
-        above = Pose(goal.x, start_pose.y, start_pose.theta)
-        if abs(dx) > 1e-9:
-            over = translate(start_pose, (math.copysign(1.0, dx), 0.0))
-            sw = sweep(ctx.world, over, abs(dx))
-            if sw.end is not SweepEnd.LIMIT or any(not st.is_free for st in sw.states):
+        here = start_pose
+        if not _same_orientation(ctx, here, goal):
+            rise = _clear_height(ctx, here, goal)
+            if rise > CONTACT_TOL:
+                up = self._up(ctx, FREE, here, rise)
+                if up is None:
+                    return None
+                legs.append(up)
+                here = up.end
+            turn = self._turn(ctx, here, goal.theta)
+            if turn is None:
                 return None
-            legs.append(Segment(self.name, FREE, FREE, over, 0.0, abs(dx), ctx.world,
-                                {"waypoints": [list(start_pose.to_degrees()), list(above.to_degrees())],
-                                 "travel": round(abs(dx), 6)}))
+            legs.append(turn)
+            here = turn.end
+        if here.y <= goal.y:
+            return None
+        above = Pose(goal.x, here.y, here.theta)
+        if abs(goal.x - here.x) > 1e-9:
+            over = self._over(ctx, here, above)
+            if over is None:
+                return None
+            legs.append(over)
         drop = above.y - goal.y
         down = translate(above, (0.0, -1.0))
         sw = sweep(ctx.world, down, drop + AIR_PROBE_MM)
@@ -476,33 +569,95 @@ class AirMove:
             return None
         end = down.pose(sw.s_end)
         legs.append(Segment(self.name, FREE, to_state, down, 0.0, sw.s_end, ctx.world,
-                            {"waypoints": [list(above.to_degrees()), list(end.to_degrees())],
-                             "travel": round(sw.s_end, 6), "place": True}))
+                            {"waypoints": _waypoints(above, end), "travel": round(sw.s_end, 6), "place": True}))
         return tuple(legs)
 
 
-def _air_holders(ctx: PlanningContext, theta: float) -> np.ndarray | None:
-    """The grasps that hold the object in the air at orientation ``theta`` (the gripper
-    and gravity only: :func:`geometry.grasps.motion_conditioned` over two poses far above
-    the environment, where nothing else touches). Equilibrium depends on the orientation
-    alone, so this is computed once. ``None`` without a grasp set in the context."""
+def _air_holders(ctx: PlanningContext, theta: float) -> np.ndarray:
+    """The grasps that hold the object in the air at orientation ``theta``: the gripper
+    and gravity only, the finger contacts sticking (:func:`geometry.grasps.motion_conditioned`
+    at a pose far above the environment, where nothing else touches). Equilibrium depends
+    on the orientation alone, so this is computed once per orientation in a solve
+    (``ctx.memo``)."""
+    assert ctx.grasps is not None
+    key = ("air-holders", round(float(wrap_angle(theta)), 9))
+    if key not in ctx.memo:
+        w = ctx.workspace
+        high = np.array([[0.5 * (w.xmin + w.xmax), w.ymax + 10.0 * ctx.reach, theta]])
+        ctx.memo[key] = motion_conditioned(ctx.world, ctx.grasps, high, np.arange(len(ctx.grasps)),
+                                           rate=False).indices
+    return ctx.memo[key]
+
+
+def _lift_witnesses(ctx: PlanningContext, state: ContactState) -> list[Pose]:
+    """The poses a lift out of ``state`` is looked for at: its witness poses for the
+    transitions, then every other witness of its enumeration (a block on its corner has
+    them at several tilts, and only some of them leave room for a carrying grasp)."""
+    poses = list(ctx.witness_poses(state))
+    for w in ctx.witnesses:
+        if w.state == state:
+            poses.extend(w.witnesses)
+    unique: dict[bytes, Pose] = {}
+    for p in poses:
+        unique.setdefault(p.as_array().round(9).tobytes(), p)
+    return list(unique.values())
+
+
+def _turn_path(ctx: PlanningContext, theta0: float, theta1: float, longer: bool) -> np.ndarray:
+    """Poses (n, 3) far above the environment at the orientations of a turn from
+    ``theta0`` to ``theta1`` (the shorter way, or the longer), AIR_TURN_STEP_DEG apart."""
+    d = float(wrap_angle(theta1 - theta0))
+    if longer:
+        d -= math.copysign(2.0 * math.pi, d) if d != 0.0 else 0.0
+    n = max(1, int(math.ceil(abs(d) / math.radians(AIR_TURN_STEP_DEG))))
+    w = ctx.workspace
+    out = np.empty((n + 1, 3))
+    out[:, 0] = 0.5 * (w.xmin + w.xmax)
+    out[:, 1] = w.ymax + 10.0 * ctx.reach
+    out[:, 2] = theta0 + np.linspace(0.0, d, n + 1)
+    return out
+
+
+#: Candidates checked at a time along a turn when only whether one carries is asked.
+CARRIER_BATCH = 64
+
+
+def carriers(ctx: PlanningContext, pose: Pose, *, first: bool = False) -> np.ndarray | None:
+    """The grasps that can lift the object off at the contact pose ``pose`` and carry it
+    to the goal's orientation: the gripper clear of the environment at ``pose`` (as in
+    :func:`geometry.grasps.pose_conditioned`), and the object held in the air by the
+    gripper and gravity alone (the finger contacts sticking) at every orientation of a
+    turn from the pose's to the goal's, AIR_TURN_STEP_DEG apart, the shorter way (the
+    longer when none holds the shorter). The paper's air-move precondition, "a
+    collision-free path exists with the same g", at the lift-off or touch-down pose: a
+    block lying on the floor cannot be lifted by a pinch whose lower finger would be in
+    the floor, nor turned through an orientation no grasp of it holds. ``first``: only
+    whether there is one (the first batch of CARRIER_BATCH candidates that has any).
+    Without a grasp set in the context: ``None``."""
     if ctx.grasps is None:
         return None
-    w = ctx.workspace
-    high = np.array([0.5 * (w.xmin + w.xmax), w.ymax + 10.0 * ctx.reach, theta])
-    path = np.stack([high, high + [0.0, AIR_PROBE_MM, 0.0]])
-    return motion_conditioned(ctx.world, ctx.grasps, path, np.arange(len(ctx.grasps))).indices
+    held = _air_holders(ctx, pose.theta)
+    if held.size and not _same_orientation(ctx, pose, ctx.goal):
+        held = np.intersect1d(held, _air_holders(ctx, ctx.goal.theta))  # held at both ends
+    if held.size:
+        grip = ctx.grasps.world_gripper(pose.as_array(), held)
+        held = held[~gripper_env_overlap(ctx.world, grip, ctx.grasps.width[held])]
+    if not held.size or _same_orientation(ctx, pose, ctx.goal):
+        return held
+    for longer in (False, True):
+        path = _turn_path(ctx, pose.theta, ctx.goal.theta, longer)
+        for batch in np.array_split(held, -(-held.size // CARRIER_BATCH)) if first else [held]:
+            ok = motion_conditioned(ctx.world, ctx.grasps, path, batch, rate=False).indices
+            if ok.size:
+                return ok
+    return held[:0]
 
 
-def _carriable(ctx: PlanningContext, pose: Pose, holders: np.ndarray | None) -> bool:
-    """Whether one of ``holders`` (:func:`_air_holders`) fits at the contact pose ``pose``
-    (the gripper clear of the environment, :func:`geometry.grasps.pose_conditioned`): the
-    paper's air-move precondition, "a collision-free path exists with the same g", at the
-    lift-off or touch-down pose. A block lying on the floor cannot be lifted by a pinch
-    whose lower finger would be in the floor. Without a grasp set, every pose passes."""
-    if holders is None or ctx.grasps is None:
-        return True
-    return bool(np.intersect1d(pose_conditioned(ctx.world, ctx.grasps, pose.as_array()), holders).size)
+def _carriable(ctx: PlanningContext, pose: Pose) -> bool:
+    """Whether some grasp lifts the object off at ``pose`` and carries it to the goal's
+    orientation (:func:`carriers`; without a grasp set in the context, every pose passes)."""
+    found = carriers(ctx, pose, first=True)
+    return found is None or bool(found.size)
 
 
 def _leaves_to_free(ctx: PlanningContext, pose: Pose, state: ContactState, direction: tuple[float, float]) -> bool:
