@@ -230,7 +230,7 @@ def plot_comparison(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str],
         ax_t.set_ylabel("solve time, solved runs (s, log scale)\nmedian and quartiles")
         ax_t.yaxis.set_major_formatter(FuncFormatter(lambda y, _pos: _short(y)))
     else:
-        ax_t.set_ylim(bottom=0)
+        ax_t.set_ylim(0, 1.1 * max(positive) if positive else 1.0)
         ax_t.set_ylabel("solve time, solved runs (s)\nmedian and quartiles")
     ax_t.grid(True, axis="y", alpha=0.35)
     ax_t.set_xticks(range(len(scenarios)), scenarios, rotation=30, ha="right", fontsize=8)
