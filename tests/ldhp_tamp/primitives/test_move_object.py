@@ -183,3 +183,28 @@ def test_task1_block_is_lifted_tilted_and_turned_flat_in_the_air() -> None:
     assert math.radians(-85.0) < lift_off < math.radians(-60.0)  # lifted tilted, not flat
     report = simulate_plan(plan, sc)
     assert report.executes, report.reason
+
+
+def test_a_placement_turns_the_object_to_the_goal_first() -> None:
+    """The peg held tilted 30 degrees low over the surface: placed into the hole, it is
+    raised until it can turn clear of everything, turned upright about its centre of
+    mass, moved over the hole and lowered into it."""
+    peg = load_scenario(scenarios_dir() / "cmgmp_peg_in_hole.toml")
+    ctx = build_context(peg.world, peg.start, peg.goal)
+    tilted = Pose(-100.0, 60.0, math.radians(30.0))  # its lowest corner 5.5 mm above the surface
+    assert not object_env_overlap(peg.world, tilted.as_array()[None]).any()
+    samples = list(AirMove().sample(ctx, FREE, ctx.goal_contact.state, tilted, np.random.default_rng(0), 3))
+    assert len(samples) == 1
+    legs = samples[0]
+    check_joined(legs)
+    assert [seg.motion.kind for seg in legs] == [MotionKind.TRANSLATE, MotionKind.ROTATE, MotionKind.TRANSLATE,
+                                                 MotionKind.TRANSLATE]
+    up, turn, over, down = legs
+    assert up.motion.direction == (0.0, 1.0) and down.motion.direction == (0.0, -1.0)
+    assert turn.parameters["angle"] == pytest.approx(30.0) and turn.parameters["sense"] == "cw"
+    assert down.to_state == ctx.goal_contact.state and down.parameters["place"]
+    end = down.end
+    assert (end.x, end.theta) == pytest.approx((peg.goal.x, peg.goal.theta), abs=1e-9)
+    assert end.y == pytest.approx(peg.goal.y, abs=0.1)
+    for seg in legs:
+        assert not object_env_overlap(peg.world, seg.poses[:-1]).any()
