@@ -86,6 +86,13 @@ class Motion:
     def pose(self, s: float) -> Pose:
         return Pose.from_array(self.poses([s])[0])
 
+    def positions_at(self, theta: Sequence[float] | FloatArray) -> FloatArray:
+        """TWO_CONTACT: the translations (n, 2) that keep both contacts at orientations
+        ``theta`` (NaN where the lines are parallel), whatever the start."""
+        if self.kind is not MotionKind.TWO_CONTACT:
+            raise ValueError("positions_at: only a two-contact motion is solved for its orientation")
+        return _solve_two_lines(self.lines, np.atleast_1d(np.asarray(theta, dtype=float)))
+
     def vertex_speed(self, world: World) -> float:
         """Upper bound of how far (mm) any object vertex moves per unit of ``s``."""
         verts = world.object_vertices(self.start)

@@ -23,8 +23,10 @@ from geometry.grasps import (
     motion_conditioned,
     pose_conditioned,
 )
+from geometry import grasps as grasps_module
 from geometry.poses import Pose
 from geometry.shapes import make_polygon
+from geometry.tolerances import CONTACT_TOL
 from geometry.world import (
     Environment,
     Friction,
@@ -683,3 +685,48 @@ def test_edge_offsets_are_checked(offsets):
     world = make_world(TwoPointGripper(R, (0.0, 140.0)))
     with pytest.raises(GeometryError, match="edge_offsets"):
         enumerate_grasps(world, GraspOptions(samples_per_edge=4, edge_offsets=offsets))
+
+
+# -- environment contact modes along a path -------------------------------------------
+
+SLOT = [[300, 0], [0, 0], [0, 75], [-200, 75], [-200, -50], [500, -50], [500, 75], [300, 75]]
+
+
+def _ladder_over_the_lip(lean_deg: float, turn_deg: float, steps: int = 6) -> np.ndarray:
+    """Poses of the 70 x 150 block leaning left in the 75 mm deep slot, its corner v1 on
+    the floor and its left face l4 on the lip corner (0, 75), turning from ``lean_deg``
+    by ``turn_deg``: v1 at x = 75 tan(phi), the pose's origin being v1."""
+    phi = np.radians(np.linspace(lean_deg, lean_deg + turn_deg, steps))
+    return np.stack([75.0 * np.tan(phi), np.zeros_like(phi), phi], axis=1)
+
+
+def test_a_face_sliding_over_a_lip_corner_while_turning_slides() -> None:
+    """The lip corner stays on the turning face l4 (kept by construction), so the
+    contact slides at every sample: measured in the face's own frame its normal drift is
+    zero. In the world frame the face turns under the corner, a drift of step x turn
+    (0.03 mm on a 2 mm step turning a degree) that the scale-aware threshold would call
+    separating, leaving a one-finger hold nothing to lean on."""
+    world = make_world(polyline(palm=False), solids=(SLOT,), mu_env=0.03)
+    path = _ladder_over_the_lip(40.0, 5.0)
+    env = grasps_module._env_contacts(world, path, CONTACT_TOL)
+    lip = np.linalg.norm(env.points - np.array([0.0, 75.0]), axis=2) < 1e-6
+    assert lip.sum(axis=1).tolist() == [1] * len(path)
+    assert (env.modes[lip] == mechanics.ContactMode.SLIDING).all()
+    floor = np.abs(env.points[..., 1]) < 1e-6
+    assert (env.modes[floor] == mechanics.ContactMode.SLIDING).all()  # v1 slides right, the last sample too
+
+
+def test_a_corner_leaving_the_lip_for_the_wall_separates_there() -> None:
+    """At the instant the block's top corner v4 sits on the lip corner, the contact
+    reported there has one face's normal; the corner going down the wall moves into that
+    normal's half-plane without overlapping anything, which is a separation, not a
+    penetration (that would make the motion infeasible for every grasp)."""
+    world = make_world(polyline(palm=False), solids=(SLOT,), mu_env=0.03)
+    phi0 = math.acos(0.5)  # v4 = v1 + 150 (-sin, cos) on (0, 75)
+    phi = phi0 + np.radians([0.0, 1.0, 2.0])
+    path = np.stack([150.0 * np.sin(phi), np.zeros_like(phi), phi], axis=1)  # v1 on the floor, v4 down the wall
+    assert not collision.object_env_overlap(world, path[1:]).any()
+    env = grasps_module._env_contacts(world, path, CONTACT_TOL)
+    assert not (env.modes[0] == mechanics.ContactMode.PENETRATING).any()
+    corner = np.linalg.norm(env.points[0] - np.array([0.0, 75.0]), axis=1) < CONTACT_TOL
+    assert corner.any() and (env.modes[0][corner] != mechanics.ContactMode.STICKING).all()
