@@ -24,11 +24,11 @@ from typing import TYPE_CHECKING, Any, Iterator
 
 import numpy as np
 
-from geometry.contacts import contact_points, principal_contacts
+from geometry.contacts import contact_points, contact_state, principal_contacts
 from geometry.collision import gripper_env_overlap
 from geometry.grasps import motion_conditioned
 from geometry.features import FREE, Contact, ContactKind, ContactState
-from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, kept_contact_holds, rotate_about, sweep, translate, two_contact
+from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, SweepPiece, kept_contact_holds, rotate_about, sweep, translate, two_contact
 from geometry.poses import Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL
 from geometry.world import PolylineGripper, TwoPointGripper, World
@@ -75,6 +75,67 @@ def _consecutive_pairs(sw: Sweep) -> set[tuple[ContactState, ContactState]]:
     return {(a, b) for a, b in zip(st, st[1:]) if a != b}
 
 
+def _transit(sw: Sweep, nodes: frozenset[ContactState]) -> tuple[ContactState, ContactState, float] | None:
+    """Where ``sw`` leaves a state of the graph for a degenerate one the graph leaves out
+    (an object vertex on a convex environment vertex, see
+    :func:`ldhp_tamp.contact_graph.proper_states`) and loses a kept contact there:
+    ``(a, x, s)``, the state left, the degenerate state and a parameter inside it. A
+    ladder slide over the slot's lip ends so (the top corner reaches the lip and the face
+    that slid on it runs out); the motion goes on under another law (the corner down the
+    wall), which :meth:`_Swept.transitions` and the streams follow."""
+    pieces = sw.pieces
+    for k in range(1, len(pieces)):
+        if pieces[k].state in nodes:
+            continue
+        if k == len(pieces) - 1 and sw.end is SweepEnd.CONTACT_LOST and pieces[k - 1].state in nodes:
+            return pieces[k - 1].state, pieces[k].state, 0.5 * (pieces[k].s0 + pieces[k].s1)
+        return None
+    return None
+
+
+def _joint(motion: Motion, onward: Motion, lo: float, hi: float, guess: float) -> float:
+    """The parameter of ``motion`` in [lo, hi] (widened by the interval's length each
+    way) where its pose also satisfies ``onward``'s two contact lines, when ``onward`` is
+    a two-contact motion (any other motion starts exactly where it is put): ``guess``
+    otherwise, or when no such parameter is found."""
+    if onward.kind is not MotionKind.TWO_CONTACT:
+        return guess
+    from scipy.optimize import minimize_scalar  # only the transits through an instant need it
+
+    def gap(s: float) -> float:
+        p = motion.poses([s])[0]
+        q = onward.positions_at([p[2]])[0]
+        d = float(np.hypot(p[0] - q[0], p[1] - q[1]))
+        return d if math.isfinite(d) else 1e9
+
+    width = max(hi - lo, 1e-9)
+    res = minimize_scalar(gap, bounds=(max(lo - width, 0.0), hi + width), method="bounded",
+                          options={"xatol": 1e-12})
+    return float(res.x) if res.success and gap(float(res.x)) < min(gap(guess), 1e-6) else guess
+
+
+def _from_instant(world: World, sw: Sweep, x: ContactState) -> Sweep:
+    """``sw``, started in the degenerate state ``x``, with the brief states (pieces shorter
+    than MARGIN_MM of vertex motion) it passes right after ``x`` counted as ``x``: at a
+    vertex on a lip corner both faces at that vertex touch the wall within tolerance for
+    a moment, which is one event, not a state to stop in."""
+    pieces = list(sw.pieces)
+    if not pieces or pieces[0].state != x:
+        return sw
+    speed = max(sw.motion.vertex_speed(world), 1e-9)
+    while len(pieces) > 2 and (pieces[1].s1 - pieces[1].s0) * speed < MARGIN_MM:
+        pieces[:2] = [SweepPiece(x, pieces[0].s0, pieces[1].s1)]
+    return Sweep(sw.motion, tuple(pieces), sw.end)
+
+
+def _onward(world: World, sw: Sweep, x: ContactState, nodes: frozenset[ContactState]) -> ContactState | None:
+    """The graph state a sweep started in the degenerate state ``x`` enters first."""
+    pieces = _from_instant(world, sw, x).pieces
+    if len(pieces) < 2 or pieces[0].state != x or pieces[1].state not in nodes:
+        return None
+    return pieces[1].state
+
+
 def _sense_name(sense: int) -> str:
     return "ccw" if sense > 0 else "cw"
 
@@ -98,10 +159,22 @@ class _Swept:
                 motions += [(motion, s_max) for pose in ctx.witness_poses(state)
                             for motion, s_max, _ in self.families(ctx, pose)]
 
+        nodes = ctx.state_set
+
         def pairs_from(job: tuple[Motion, float]) -> set[tuple[ContactState, ContactState]]:
             budget.check(ctx.deadline, where)
             sw = sweep(ctx.world, job[0], job[1], step_mm=TRANSITION_STEP_MM, refine_bits=10)
-            return _consecutive_pairs(sw)
+            found = _consecutive_pairs(sw)
+            transit = _transit(sw, nodes)
+            if transit is not None:  # on through a vertex-on-vertex instant, under another motion law
+                a, x, s_x = transit
+                pose = sw.motion.pose(s_x)
+                for motion, s_max, _ in self.families(ctx, pose):
+                    after = sweep(ctx.world, motion, s_max, step_mm=TRANSITION_STEP_MM, refine_bits=10)
+                    b = _onward(ctx.world, after, x, nodes)
+                    if b is not None and b != a:
+                        found.add((a, b))
+            return found
 
         pairs: set[tuple[ContactState, ContactState]] = set()
         for found in fork_map(pairs_from, motions):
@@ -109,15 +182,38 @@ class _Swept:
         return pairs
 
     def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
-               start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment]:
-        scored: list[tuple[float, float, Segment]] = []
+               start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment | tuple[Segment, ...]]:
+        scored: list[tuple[float, float, Segment | tuple[Segment, ...]]] = []
         families = list(self.families(ctx, start_pose))
         sweeps = _stream_sweeps(ctx, [(motion, s_max) for motion, s_max, _ in families])
+        nodes = ctx.state_set
         for (motion, s_max, params), sw in zip(families, sweeps):
             for s_end in _end_values(ctx, sw, from_state, to_state, rng):
                 seg = self._segment(ctx, motion, s_end, from_state, to_state, params)
                 score = float(ctx.goal_distance(seg.poses[-1:])[0])
                 scored.append((score, float(rng.random()), seg))  # ties broken at random
+            transit = _transit(sw, nodes)
+            if transit is None or transit[0] != from_state:
+                continue
+            # Through a vertex-on-vertex instant x (a state the graph leaves out): this
+            # motion up to it, then another family of the primitive from there into to_state.
+            _, x, s_x = transit
+            piece = sw.pieces[-1]
+            onward = list(self.families(ctx, motion.pose(s_x)))
+            for (motion2, _, params2), sw2 in zip(onward, _stream_sweeps(ctx, [(m, s) for m, s, _ in onward])):
+                ends = _end_values(ctx, _from_instant(ctx.world, sw2, x), x, to_state, rng)
+                if not ends:
+                    continue
+                # Join the two motions where both hold exactly (a two-contact motion
+                # re-solves its start onto its own contact lines).
+                s_j = _joint(motion, motion2, piece.s0, piece.s1, s_x)
+                first = self._segment(ctx, motion, s_j, from_state, x, params)
+                if motion2.kind is MotionKind.TWO_CONTACT:
+                    motion2 = two_contact(ctx.world, first.end, motion2.kept, motion2.sense)  # type: ignore[arg-type]
+                for s_end in ends:
+                    second = self._segment(ctx, motion2, s_end, x, to_state, params2)
+                    score = float(ctx.goal_distance(second.poses[-1:])[0])
+                    scored.append((score, float(rng.random()), (first, second)))
         scored.sort(key=lambda t: (t[0], t[1]))
         for _, _, seg in scored[:limit]:
             yield seg
@@ -176,11 +272,19 @@ def _end_values(ctx: PlanningContext, sw: Sweep, from_state: ContactState, to_st
         a, b = pieces[k].s0, pieces[k].s1
         last = k == len(pieces) - 1
         if (b - a) * speed < INSTANT_MM:
-            return [b] if last and sw.end is SweepEnd.BLOCKED else [0.5 * (a + b)]
+            # An instant: its end where the sweep stops there, else its middle; but the
+            # refinement places a short piece's boundaries only to within the contact
+            # tolerance (a ladder slide meets the wall with its top face 0.03 degrees
+            # before it lies flat): the first of these where to_state does hold.
+            tries = [b, 0.5 * (a + b)] if last else [0.5 * (a + b), b]
+            for v in tries:
+                if contact_state(ctx.world, sw.motion.pose(v)) == to_state:
+                    return [v]
+            return [tries[0]] if last and sw.end is SweepEnd.BLOCKED else [0.5 * (a + b)]
         m = min(MARGIN_MM / speed, (b - a) / 4.0)
         mid = 0.5 * (a + b) if rng is None else a + m + float(rng.random()) * (b - a - 2.0 * m)
         values = [b - m, mid, a + m]
-        if last and sw.end is SweepEnd.BLOCKED:
+        if last and sw.end is SweepEnd.BLOCKED and contact_state(ctx.world, sw.motion.pose(b)) == to_state:
             values.insert(0, b)
         g = _goal_value(ctx, sw.motion, a + m, b - m)
         values.append(g)
