@@ -627,6 +627,7 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         return _BottomOutcome(reason=why, attempt=_Attempt(why, FailureTier.BOTTOM, FailureCause.NO_GRASP_PATH,
                                                            what=why))
     refinements = 0
+    per_root: dict[int, int] = {}  # refinements per sensitive segment of the path
     rejected = 0
     while True:
         t0 = budget.clock()
@@ -656,11 +657,26 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
                 primitive=steps[verdict.step].primitive))
         k = res.failing_segment
         k = k if k is not None and 0 <= k < len(segments) else len(segments) - 1
+        j = _window_before(segments, k, per_root, l_max) if res.status is GraspPlanStatus.NO_PATH else None
+        if j is not None:
+            # The grasps that execute segment k exist but cannot be reached with the
+            # grasps carried so far: let the gripper regrasp where the object rests
+            # alone on the way there, at the latest such window not yet a layer.
+            root = _root(segments[j])
+            segments[j:j + 1] = list(segments[j].split(_window_cut(segments[j])))
+            per_root[id(root)] = per_root.get(id(root), 0) + 1
+            refinements += 1
+            c.refinements += 1
+            continue
         seg = segments[k]
         # The paper's rule: a failing tip or biplanar slide is bisected (up to L_max
-        # times); any other failure goes back to the top tier for another pose path.
-        if seg.refinable and refinements < l_max:
+        # times per sensitive segment of the pose path, its "at most L_max refinements
+        # per sensitive segment"); any other failure goes back to the top tier for
+        # another pose path.
+        root = _root(seg)
+        if seg.refinable and per_root.get(id(root), 0) < l_max:
             segments[k:k + 1] = list(seg.split(_rest_cut(seg)))
+            per_root[id(root)] = per_root.get(id(root), 0) + 1
             refinements += 1
             c.refinements += 1
             continue
@@ -668,6 +684,41 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         if refinements:
             why += f" (after {refinements} dichotomy refinement(s))"
         return _BottomOutcome(segment=seg, reason=why, attempt=_grasp_failure(res, seg, k, why))
+
+
+def _window_before(segments: Sequence[Segment], k: int, per_root: dict[int, int], l_max: int) -> int | None:
+    """The latest refinable segment at or before ``k`` with a rest window strictly inside
+    it (:func:`_window_cut`), whose sensitive segment has refinements left; ``None`` if
+    there is none."""
+    for j in range(k, -1, -1):
+        seg = segments[j]
+        if seg.refinable and per_root.get(id(_root(seg)), 0) < l_max and _window_cut(seg) is not None:
+            return j
+    return None
+
+
+def _window_cut(seg: Segment) -> int | None:
+    """The middle of the longest run of samples of ``seg`` at which the object rests on
+    the environment alone (``REST_FRICTION``) that touches neither end of it (a run at
+    an end is a layer of the grasp graph already); ``None`` if there is none."""
+    poses = np.asarray(seg.poses, dtype=float)
+    if poses.shape[0] < 3:
+        return None
+    rests = rests_alone(seg.world, poses, REST_FRICTION)
+    edges = np.diff(np.concatenate([[0], rests.astype(np.int8), [0]]))
+    runs = [(a, b) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))
+            if a > 0 and b < poses.shape[0]]
+    if not runs:
+        return None
+    a, b = max(runs, key=lambda r: r[1] - r[0])
+    return (int(a) + int(b) - 1) // 2
+
+
+def _root(seg: Segment) -> Segment:
+    """The pose path's segment that bisections cut ``seg`` from (``seg`` itself if none)."""
+    while seg.parent is not None:
+        seg = seg.parent
+    return seg
 
 
 def _grasp_failure(res: GraspPlanResult, seg: Segment, k: int, text: str) -> _Attempt:

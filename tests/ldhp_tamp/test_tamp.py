@@ -332,6 +332,33 @@ def test_a_failing_segment_is_cut_where_the_object_rests_alone() -> None:
         push.split(0)
 
 
+def test_a_rest_window_inside_an_earlier_segment_becomes_a_layer() -> None:
+    """When the grasps that execute a segment cannot be reached, the bottom tier cuts
+    the latest earlier sensitive segment at a rest window inside it (where the gripper
+    can let go and regrasp): the ladder slide of task 2 from standing against the slot's
+    wall to 40 degrees rests alone only between about 25 and 27 degrees. A window at a
+    segment's end is a layer already and is not cut again."""
+    import math
+
+    from ldhp_tamp.contact_graph import build_context
+    from ldhp_tamp.primitives.move_object import BiplanarSlide
+    from ldhp_tamp.tamp import _window_before, _window_cut
+
+    sc = load_scenario(scenarios_dir() / "task2_slot_insertion.toml")
+    ctx = build_context(sc.world, sc.start, sc.goal, stream_samples=3)
+    s = {st.name: st for st in ctx.states}
+    seg = next(x for x in BiplanarSlide().sample(ctx, s["l1-e1+l4-e2"], s["v1-e1+l4-ve3"],
+                                                 ctx.witness_poses(s["l1-e1+l4-e2"])[0], np.random.default_rng(0), 5)
+               if math.degrees(x.end.theta) > 40.0)
+    at = _window_cut(seg)
+    assert at is not None and 24.0 < math.degrees(seg.poses[at][2]) < 28.0
+    a, b = seg.split(at)
+    assert _window_cut(a) is None and _window_cut(b) is None  # the window now ends both halves
+    per_root: dict[int, int] = {}
+    assert _window_before([seg, b], 1, per_root, 4) == 0
+    assert _window_before([seg, b], 1, {id(seg): 4}, 4) is None  # its refinements are spent
+
+
 def test_start_grasp_any_starts_from_a_grasp_that_holds_the_object() -> None:
     """``start_grasp = "any"``: the search starts from every grasp that holds the block
     at its start pose in the air and takes the cheapest; the plan's first waypoint shows
