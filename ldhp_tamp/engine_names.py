@@ -8,9 +8,10 @@ installed, and most scenarios name ``pyperplan``: this module answers from unifi
 own table of one-shot planners and the package providing each, found with
 :func:`importlib.util.find_spec` (which locates a package without importing it).
 
-A name it does not know is not refused here: the loader then asks unified-planning itself
-(:func:`ldhp_tamp.symbolic.available_engines`), which also knows engines configured in a
-``.uprc`` file. ``tests/ldhp_tamp/test_engine_names.py`` checks that the table agrees with
+A name it does not know is refused without unified-planning too when no unified-planning
+configuration file exists (:func:`known_planners`); where one does, the loader asks
+unified-planning itself (:func:`ldhp_tamp.symbolic.available_engines`), which also knows
+engines configured in it. ``tests/ldhp_tamp/test_engine_names.py`` checks that the table agrees with
 unified-planning's on the installed engines and on the package of every entry.
 
 :func:`recorded_kind` answers the other question asked before a search, whether the engine
@@ -36,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import PurePath
 
 __all__ = ["ONESHOT_PLANNERS", "SUPPORTED_KINDS", "RecordedKind", "config_files", "installed_planners",
-           "recorded_kind"]
+           "known_planners", "recorded_kind"]
 
 #: unified-planning's one-shot planning engines (the planners of its factory's
 #: ``DEFAULT_ENGINES``; not its anytime planners, validators or compilers) and the
@@ -67,6 +68,17 @@ def installed_planners() -> tuple[str, ...]:
             except (ImportError, ValueError):
                 found[package] = False
     return tuple(sorted(name for name, package in ONESHOT_PLANNERS.items() if found[package]))
+
+
+def known_planners() -> tuple[str, ...] | None:
+    """The one-shot planners unified-planning's engine factory has, or ``None`` when only
+    unified-planning can tell: a configuration file (:func:`config_files`) may add or
+    redefine engines. Otherwise the factory has the planners of its table whose package
+    imports, i.e. :func:`installed_planners` (a package that is found but fails to import
+    is the one difference)."""
+    if any(os.path.isfile(f) for f in config_files()):
+        return None
+    return installed_planners()
 
 
 @dataclass(frozen=True)
@@ -112,13 +124,11 @@ def recorded_kind(engine: str) -> RecordedKind | None:
     """The recorded supported kind of ``engine``, or ``None`` when it must be asked.
 
     ``None`` when the engine is not in :data:`SUPPORTED_KINDS`, its package is not
-    installed (:func:`installed_planners`) or is another release than the recorded one,
-    or a unified-planning configuration file exists (it may redefine the engine).
+    installed or is another release than the recorded one, or a unified-planning
+    configuration file exists (it may redefine the engine; :func:`known_planners`).
     """
     kind = SUPPORTED_KINDS.get(engine)
-    if kind is None or engine not in installed_planners() or _release(kind.distribution) != kind.release:
-        return None
-    if any(os.path.isfile(f) for f in config_files()):
+    if kind is None or engine not in (known_planners() or ()) or _release(kind.distribution) != kind.release:
         return None
     return kind
 

@@ -649,14 +649,16 @@ def _read_planner(r: _Reader, t: Mapping[str, Any], base_dir: Path, check: bool)
         domain_path = find_domain(domain, base_dir)
         if domain_path is None:
             raise r.fail("planner.domain", _unknown_domain(domain, base_dir))
-        # The usual engines are known without importing unified-planning (over a second);
-        # any other name is looked up by ldhp_tamp.symbolic, the module that imports it.
-        from ldhp_tamp.engine_names import installed_planners
+        # The engines are known without importing unified-planning (over a second) unless a
+        # configuration file may add some: then ldhp_tamp.symbolic, which imports it, asks.
+        from ldhp_tamp.engine_names import installed_planners, known_planners
 
         if engine not in installed_planners():
-            from ldhp_tamp.symbolic import available_engines
+            engines = known_planners()
+            if engines is None:
+                from ldhp_tamp.symbolic import available_engines
 
-            engines = tuple(available_engines())
+                engines = tuple(available_engines())
             if engine not in engines:
                 raise r.fail("planner.engine", f"unknown engine {engine!r} "
                                                f"(installed: {', '.join(engines) or 'none'})")

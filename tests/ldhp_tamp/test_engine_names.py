@@ -22,6 +22,13 @@ from ldhp_tamp.errors import InputError
 DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 
 
+def _skip_if_configured() -> None:
+    """A unified-planning configuration file on this machine (up.ini, ~/.uprc) sends every
+    engine question to unified-planning: the fast answers cannot be compared."""
+    if any(Path(f).is_file() for f in config_files()):
+        pytest.skip("a unified-planning configuration file exists on this machine")
+
+
 def test_the_installed_planners_are_unified_plannings_one_shot_engines() -> None:
     assert set(installed_planners()) == set(symbolic.available_engines())
     assert "pyperplan" in installed_planners()
@@ -75,6 +82,7 @@ def _kinds_to_compare():  # noqa: ANN202 - ProblemKinds
 def test_a_recorded_kind_is_the_installed_engines_own(engine: str) -> None:
     if engine not in installed_planners():
         pytest.skip(f"{SUPPORTED_KINDS[engine].distribution} is not installed")
+    _skip_if_configured()
     recorded = SUPPORTED_KINDS[engine]
     # re-record SUPPORTED_KINDS from the installed release when it changes, or check pays 0.8 s
     assert recorded_kind(engine) == recorded, f"installed {recorded.distribution} is not {recorded.release}"
@@ -90,6 +98,7 @@ def test_a_recorded_kind_is_the_installed_engines_own(engine: str) -> None:
 
 def test_no_recorded_kind_for_another_release_or_a_configuration_file(monkeypatch: pytest.MonkeyPatch,
                                                                       tmp_path: Path) -> None:
+    _skip_if_configured()
     assert recorded_kind("pyperplan") is not None
     assert recorded_kind("no-such-engine") is None
     monkeypatch.setattr(engine_names, "_release", lambda distribution: "0.0.1")
@@ -105,3 +114,26 @@ def test_the_configuration_files_are_those_unified_planning_reads() -> None:
     from unified_planning.engines.factory import get_possible_config_locations
 
     assert config_files() == get_possible_config_locations()
+
+
+def test_the_known_planners_are_unified_plannings_unless_a_configuration_file_exists(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    _skip_if_configured()
+    assert engine_names.known_planners() == symbolic.available_engines()
+    config = tmp_path / "up.ini"
+    config.write_text("[engine warp-drive]\nmodule_name: warp\nclass_name: Drive\n")
+    monkeypatch.setattr(engine_names, "config_files", lambda: [str(config)])
+    assert engine_names.known_planners() is None
+
+
+def test_an_unknown_engine_is_refused_without_importing_unified_planning() -> None:
+    _skip_if_configured()
+    bad = DATA / "scenarios" / "bad" / "unknown_engine.toml"
+    code = ("import sys; from ldhp_tamp.errors import ScenarioError; from ldhp_tamp.scenario import load_scenario\n"
+            f"try:\n    load_scenario({str(bad)!r})\nexcept ScenarioError as exc:\n    print(exc)\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('unified_planning', 'ConfigSpace', 'scipy')))")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    message, imported = run.stdout.strip().splitlines()
+    assert message == (f"{bad}: planner.engine: unknown engine 'warp-drive' "
+                       f"(installed: {', '.join(symbolic.available_engines())})")
+    assert imported == "[]"

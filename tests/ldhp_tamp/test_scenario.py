@@ -49,6 +49,7 @@ def fake_planning(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.
     fake.available_engines = lambda: FAKE_ENGINES  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ldhp_tamp.symbolic", fake)
     monkeypatch.setattr(engine_names, "installed_planners", lambda: ())  # always ask the fake
+    monkeypatch.setattr(engine_names, "known_planners", lambda: None)
     return domains
 
 
