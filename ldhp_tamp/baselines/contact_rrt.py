@@ -474,7 +474,7 @@ class _Node:
     parent: int
     segment: Segment | None = None
     changes: tuple[_Change, ...] = ()  # at the parent's pose, before the segment
-    gt: FloatArray | None = field(default=None, repr=False)  # packed G_T mask
+    gt: np.ndarray | None = field(default=None, repr=False)  # packed G_T mask (uint8), computed when needed
 
 
 @dataclass
@@ -486,7 +486,7 @@ class _Stats:
     grasp_time: float = 0.0
     no_motion: int = 0
     no_grasp: int = 0
-    ambiguous: int = 0  # extensions whose step the forward problem refused
+    ambiguous: int = 0  # grasps the forward problem refused on a step
     judge_time: float = 0.0
     states: set[str] = field(default_factory=set)
     best: float = math.inf  # the nearest any node came to the goal
