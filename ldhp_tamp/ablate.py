@@ -460,11 +460,9 @@ def _failed_cell(job: _Job, failure: CellFailure, reason: str, wall_s: float) ->
     return AblationCell(job.removed, job.scenario, job.scenario_file, False, failure.value, reason, wall_s)
 
 
-def _with_wall(cell: AblationCell, wall_s: float) -> AblationCell:
-    return dataclasses.replace(cell, time_s=wall_s)
-
-
-#: How :func:`ldhp_tamp.sweep.run_cells` solves a cell.
+#: How :func:`ldhp_tamp.sweep.run_cells` solves a cell. A cell's ``time_s`` stays the one
+#: measured around the solve in its process (the process's start-up, which differs between
+#: executors, is not counted).
 _TASK: CellTask[_Job, AblationCell] = CellTask(run=_solve_job, failed=_failed_cell,
                                                preload=("ldhp_tamp.ablate", "ldhp_tamp.tamp"), name="ablate")
 
