@@ -391,6 +391,7 @@ def run_isolated(task: CellTask[C, R], cell: C, hard_limit_s: float | None) -> R
     assert proc.stdin is not None
     chunks: list[bytes] = []
     timed_out = False
+    ended = False  # the child closed its end: it is exiting
     try:
         proc.stdin.write(pickle.dumps(list(sys.path)))
         proc.stdin.write(pickle.dumps((task, cell), protocol=pickle.HIGHEST_PROTOCOL))
@@ -407,10 +408,11 @@ def run_isolated(task: CellTask[C, R], cell: C, hard_limit_s: float | None) -> R
                     continue
                 data = os.read(read_fd, 1 << 16)
                 if not data:
+                    ended = True
                     break
                 chunks.append(data)
     except BrokenPipeError:  # the child died before reading its cell
-        pass
+        ended = True
     finally:
         wall = time.monotonic() - start
 
@@ -419,7 +421,7 @@ def run_isolated(task: CellTask[C, R], cell: C, hard_limit_s: float | None) -> R
                 proc.wait(s)
             return proc.returncode is not None
 
-        if timed_out or not wait(_EXIT_WAIT_S):
+        if not ended or not wait(_EXIT_WAIT_S):  # the limit, or an exception here (Ctrl-C)
             _kill_group(proc.pid, wait)
         else:
             with contextlib.suppress(ProcessLookupError, PermissionError):
