@@ -11,8 +11,8 @@ own table of one-shot planners and the package providing each, found with
 A name it does not know is refused without unified-planning too when no unified-planning
 configuration file exists (:func:`known_planners`); where one does, the loader asks
 unified-planning itself (:func:`ldhp_tamp.symbolic.available_engines`), which also knows
-engines configured in it. ``tests/ldhp_tamp/test_engine_names.py`` checks that the table agrees with
-unified-planning's on the installed engines and on the package of every entry.
+engines configured in it. ``tests/ldhp_tamp/test_engine_names.py`` checks that the table
+agrees with unified-planning's on the installed engines and on the package of every entry.
 
 :func:`recorded_kind` answers the other question asked before a search, whether the engine
 supports the domain's problem kind, from :data:`SUPPORTED_KINDS`: each engine's
