@@ -74,7 +74,7 @@ from ldhp_tamp.planners import register
 from ldhp_tamp.primitives import REGISTRY
 from ldhp_tamp.primitives.adjust_grasp import IntraEdges
 from ldhp_tamp.scenario import Scenario
-from ldhp_tamp.tamp import SolveOptions, SolveResult, SolveStatus
+from ldhp_tamp.tamp import EDGE_OFFSET_RANGE, SolveOptions, SolveResult, SolveStatus
 from ldhp_tamp.validate import domain_actions, validate_plan
 
 __all__ = ["ENGINE", "Mode", "ModeTwist", "RRTOptions", "mode_twists", "solve", "solve_rrt"]
@@ -176,7 +176,8 @@ MODES: tuple[Mode, ...] = tuple(Mode)
 class ModeTwist:
     """One kinematically feasible contact mode and the object twist it allows toward the
     target: ``twist`` = (vx, vy, omega) of the pose's origin, ``kind`` the motion family
-    that realises it exactly (``rotate``: about ``pivot``, the sticking point;
+    that realises it exactly (``rotate``: about ``pivot``, the sticking point, or with
+    ``pivot`` None and every contact separating about the twist's instantaneous centre;
     ``translate``; ``two-contact``: keeping the points ``kept``)."""
 
     modes: tuple[Mode, ...]
@@ -214,16 +215,16 @@ def _project(rows: list[FloatArray], target: FloatArray, weight: FloatArray) -> 
 
 
 def mode_twists(points: FloatArray, normals: FloatArray, origin: FloatArray, target: FloatArray,
-                radius: float) -> list[ModeTwist]:
+                radius: float, free: FloatArray | None = None) -> list[ModeTwist]:
     """Enumerate the contact modes of the point contacts ``points`` (inward ``normals``)
     and, for each, the twist toward ``target`` it allows (CMGMP's mode-guided velocity).
 
     A mode assignment's maintained contacts (sticking or sliding) make equality rows
     (normal velocity 0, and tangential 0 for sticking); the target twist is projected onto
     their null space in the metric ``diag(1, 1, radius^2)``; the projection must separate
-    the separating contacts and slide the sliding ones in their sense. Twists the plan's
-    vocabulary cannot carry out exactly (a free rotation, a rotating slide on one contact)
-    are projected again with no rotation. Equal twists of different assignments are kept
+    the separating contacts and slide the sliding ones in their sense. A twist the plan's
+    vocabulary cannot carry out exactly (a rotating slide on one contact) is projected
+    again with no rotation. Equal twists of different assignments are kept
     once (the first, in :data:`MODES` order).
 
     Parameters
@@ -235,6 +236,9 @@ def mode_twists(points: FloatArray, normals: FloatArray, origin: FloatArray, tar
         Desired (dx, dy, dtheta).
     radius : float
         Object radius (mm): weighs rotation against translation.
+    free : (3,), optional
+        The twist of the mode where every contact separates (default ``target``): the
+        screw that lands on the target pose exactly (:func:`_screw_twist`).
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     normals = np.asarray(normals, dtype=float).reshape(-1, 2)
@@ -254,7 +258,7 @@ def mode_twists(points: FloatArray, normals: FloatArray, origin: FloatArray, tar
                 rows.append(jn[i])
             if m == STICKING:
                 rows.append(jt[i])
-        xi = _project(rows, target, weight)
+        xi = _project(rows, target, weight) if rows or free is None else np.asarray(free, dtype=float)
         if xi is None:
             continue
         sticking = [i for i, m in enumerate(modes) if m == STICKING]
@@ -265,7 +269,9 @@ def mode_twists(points: FloatArray, normals: FloatArray, origin: FloatArray, tar
             kind, pivot, kept = MotionKind.ROTATE, sticking[0], ()
         elif rotating and not sticking and len(sliding) == 2:
             kind, kept = MotionKind.TWO_CONTACT, tuple(sliding)
-        elif rotating:  # not a motion of the vocabulary: its translation part
+        elif rotating and not sliding:  # free: a rotation about the twist's instantaneous centre
+            kind = MotionKind.ROTATE
+        elif rotating:  # a slide that turns on one contact, not in the vocabulary: its translation part
             xi = _project(rows + [np.array([0.0, 0.0, 1.0])], target, weight)
             if xi is None:
                 continue
@@ -341,7 +347,7 @@ def _candidates(world: World, pose: Pose, target: FloatArray, radius: float, max
     p0 = pose.as_array()
     goal = np.array([target[0] - p0[0], target[1] - p0[1], float(wrap_angle(target[2] - p0[2]))])
     out: list[_Candidate] = []
-    for mt in mode_twists(pts, nrm, p0[:2], goal, radius):
+    for mt in mode_twists(pts, nrm, p0[:2], goal, radius, free=_screw_twist(p0, np.asarray(target, dtype=float))):
         modes = [f"{cp.contacts[int(cp.contact_index[i])].name}:{m.value}" for i, m in enumerate(mt.modes)]
         sense = 1 if mt.twist[2] > 0 else -1
         try:
@@ -350,6 +356,13 @@ def _candidates(world: World, pose: Pose, target: FloatArray, radius: float, max
                 name = "push" if mt.kept else "air-move"
                 motion = translate(pose, mt.twist[:2], [k for k in kept if k is not None])
                 params: dict[str, Any] = {"direction": [round(float(v), 6) for v in motion.direction or ()]}
+            elif mt.kind is MotionKind.ROTATE and mt.pivot is None:  # free: about the instantaneous centre
+                name = "air-move"
+                v, w = mt.twist[:2], mt.twist[2]
+                pt = p0[:2] + np.array([-v[1], v[0]]) / w
+                motion = rotate_about(pose, pt, sense)
+                params = {"centre": [round(float(pt[0]), 6), round(float(pt[1]), 6)],
+                          "sense": "ccw" if sense > 0 else "cw"}
             elif mt.kind is MotionKind.ROTATE:
                 assert mt.pivot is not None
                 name = "tip"
@@ -371,6 +384,20 @@ def _candidates(world: World, pose: Pose, target: FloatArray, radius: float, max
         params["modes"] = modes
         out.append(_Candidate(name, motion, params))
     return out
+
+
+def _screw_twist(p0: FloatArray, p1: FloatArray) -> FloatArray:
+    """The twist (vx, vy, omega) of the pose origin that carries pose ``p0`` onto ``p1``
+    in unit time by one rotation (about the displacement's fixed point) or, without a
+    turn, one translation: integrated, it lands on the target exactly."""
+    dth = float(wrap_angle(p1[2] - p0[2]))
+    if abs(dth) < 1e-9:
+        return np.array([p1[0] - p0[0], p1[1] - p0[1], 0.0])
+    c, s = math.cos(dth), math.sin(dth)
+    rot = np.array([[c, -s], [s, c]])
+    centre = np.linalg.solve(np.eye(2) - rot, p1[:2] - rot @ p0[:2])
+    r = p0[:2] - centre
+    return np.array([-dth * r[1], dth * r[0], dth])
 
 
 def _distance(poses: FloatArray, target: FloatArray, radius: float) -> FloatArray:
@@ -500,11 +527,13 @@ class _Search:
         settings = scenario.settings
         self.scenario, self.world, self.rrt, self.deadline, self.stats = scenario, world, rrt, deadline, stats
         seed = settings.seed if options.seed is None else options.seed
-        self.rng = np.random.default_rng(seed)
+        # the seed split as LDHP's solve splits it: the same seed, the same grasp set
+        grasp_rng, self.rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
         self.radius = float(world.object.polygon.radius)
         self.declared = frozenset(domain.names(Family.MOVE_OBJECT))
         k = options.samples_per_edge or settings.samples_per_edge
-        grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k))
+        offsets = tuple(float(u) for u in grasp_rng.uniform(*EDGE_OFFSET_RANGE, size=world.object.n))
+        grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k, edge_offsets=offsets))
         budget.check(deadline, "contact-rrt's setup (grasp enumeration)")
         adjust = [REGISTRY.binding(n) for n in domain.names(Family.ADJUST_GRASP) if n in REGISTRY]
         self.planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release,

@@ -74,6 +74,22 @@ def test_tipping_ccw_turns_about_the_left_corner_only():
     assert np.allclose(found[0].twist, [0.0, 0.0, 0.3])
 
 
+def test_in_free_space_the_screw_lands_on_the_target():
+    from geometry.kinematics import rotate_about
+    from geometry.poses import Pose
+    from ldhp_tamp.baselines.contact_rrt import _screw_twist
+
+    p0, p1 = np.array([10.0, 5.0, 0.2]), np.array([40.0, -3.0, 1.0])
+    twist = _screw_twist(p0, p1)
+    found = mode_twists(np.zeros((0, 2)), np.zeros((0, 2)), p0[:2], p1 - p0, RADIUS, free=twist)
+    assert len(found) == 1 and found[0].kind is MotionKind.ROTATE and found[0].pivot is None
+    v, w = found[0].twist[:2], found[0].twist[2]
+    centre = p0[:2] + np.array([-v[1], v[0]]) / w
+    assert np.allclose(rotate_about(Pose(*p0), centre, 1).poses([w])[0], p1)
+    # without a turn, a straight translation
+    assert np.allclose(_screw_twist(p0, np.array([20.0, 5.0, 0.2])), [10.0, 0.0, 0.0])
+
+
 def test_no_target_no_mode():
     assert _twists([0.0, 0.0, 0.0]) == []
 
