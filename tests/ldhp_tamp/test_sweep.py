@@ -59,6 +59,13 @@ def _ours() -> set[int]:
     return kids
 
 
+def _alive(pid: int) -> bool:
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
 @pytest.fixture(scope="module")
 def cluster() -> Iterator[distributed.LocalCluster]:
     import dask
@@ -72,7 +79,12 @@ def cluster() -> Iterator[distributed.LocalCluster]:
     try:
         yield c
     finally:
+        workers = [n.pid for n in c.workers.values()]
         c.close()
+        deadline = time.monotonic() + 30  # being reaped; not a speed check
+        while (alive := [p for p in workers if p is not None and _alive(p)]) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not alive, f"the cluster's workers outlived it: {alive}"
 
 
 @pytest.fixture(autouse=True)
