@@ -19,8 +19,9 @@ One extension, from the tree node nearest (``|dp| + r |dtheta|``) to a target po
    toward the target onto each mode's null space and keeps the modes whose projection
    obeys their inequalities and is a motion the plan's vocabulary can carry out exactly:
    a rotation about a sticking point (``tip``), a translation keeping sliding contacts
-   (``push``) or none (``air-move``), a rotation keeping two sliding contacts on two
-   non-parallel features (``biplanar-slide``).
+   (``push``), a rotation keeping two sliding contacts on two non-parallel features
+   (``biplanar-slide``), and with every contact separating the screw that lands on the
+   target (``air-move``).
 2. **Step.** The mode's one-parameter motion (:mod:`geometry.kinematics`) is walked
    toward the target at most ``step_mm`` of vertex motion (the parameter closest to the
    target) and swept against the environment (:func:`geometry.kinematics.sweep`): it stops
