@@ -1284,6 +1284,7 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         raise GeometryError(f"motion_conditioned: recheck samples must lie in [0, {n_s})")
     cand = np.setdiff1d(cand, known)
     free = np.unique(np.asarray(free_at, dtype=np.int64).reshape(-1))
+    idle = _leaves_it_still(world, grasps, p, cand)
 
     # (a) collision-free and (b) + (c) feasible at every sample: chunk by chunk of samples
     # spread over the path (ends and middle first), pruning the candidates that fail
@@ -1321,6 +1322,10 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         rejected_at.append(samples[np.argmax(hit[bad], axis=1)])
         return alive[~bad]
 
+    if idle.any():
+        rejected.append(cand[idle])
+        rejected_at.append(np.zeros(int(idle.sum()), dtype=np.int64))
+        cand = cand[~idle]
     alive = cand
     order = _spread_order(n_s)
     start, size = 0, opts.chunk
@@ -1349,6 +1354,43 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     by = np.argsort(rej, kind="stable")
     return MotionGrasps(_ro(alive, np.int64), _ro(quality, float), _ro(closure, bool), _ro(alpha, float),
                         checks, truncated, _ro(rej[by], np.int64), _ro(rat[by], np.int64), rated=rate)
+
+
+#: How far (mm of gripper travel) a one-finger grasp must push into an object resting on
+#: the environment alone at a segment's start for the motion to be forced, and the most
+#: samples looked at (the judge's "the object may stay", ldhp_tamp.executability).
+STAY_TRAVEL = 10.0
+_STAY_SAMPLES = 8
+
+
+def _leaves_it_still(world: World, grasps: GraspSet, p: FloatArray, cand: IntArray) -> BoolArray:
+    """(len(cand),) the one-finger grasps of ``cand`` that cannot start the motion along
+    ``p``: the object rests on the environment alone at ``p[0]`` (full cones), and over
+    the next samples, up to :data:`STAY_TRAVEL` of gripper travel, the finger moving with
+    the planned motion never presses into the object left where it is (by more than
+    ``PENETRATION_TOL``). Position control moves the finger; the object may as well stay
+    and the finger leave it (a finger on a standing block's top face "tipping" it about
+    a bottom corner rises off it). Balancing forces along the path exist for such a grasp,
+    so the per-sample test alone admits it; the forward problem does not."""
+    out = np.zeros(cand.size, dtype=bool)
+    if p.shape[0] < 2 or not cand.size:
+        return out
+    one = np.flatnonzero(grasps.n_touching[cand] == 1)
+    if not one.size or not contacts.rests_alone(world, p[:1])[0]:
+        return out
+    rows = cand[one]
+    m = min(p.shape[0] - 1, _STAY_SAMPLES)
+    grip = compose_batch(p[:m + 1][None, :, :], grasps.gripper[rows][:, None, :])  # (A, m + 1, 3)
+    travel = np.cumsum(np.linalg.norm(np.diff(grip[:, :, :2], axis=1), axis=2), axis=1)  # (A, m)
+    pushed = np.zeros(rows.size, dtype=bool)
+    for j in range(1, m + 1):
+        live = ~pushed & (travel[:, j - 1] <= STAY_TRAVEL)
+        if not live.any():
+            break
+        hit = collision.finger_object_overlap(world, p[0], grip[live, j], grasps.width[rows[live]], PENETRATION_TOL)
+        pushed[np.flatnonzero(live)[np.asarray(hit).reshape(int(live.sum()), -1).any(axis=1)]] = True
+    out[one[~pushed]] = True
+    return out
 
 
 def _rating(world: World, grasps: GraspSet, p: FloatArray, alive: IntArray, env: _EnvContacts | None,

@@ -730,3 +730,31 @@ def test_a_corner_leaving_the_lip_for_the_wall_separates_there() -> None:
     assert not (env.modes[0] == mechanics.ContactMode.PENETRATING).any()
     corner = np.linalg.norm(env.points[0] - np.array([0.0, 75.0]), axis=1) < CONTACT_TOL
     assert corner.any() and (env.modes[0][corner] != mechanics.ContactMode.STICKING).all()
+
+
+def test_a_finger_that_would_rise_off_a_resting_block_cannot_start_its_tip() -> None:
+    """The standing block rests on the table alone. Tipped clockwise about its
+    bottom-right corner, a finger on its left side presses into it (the motion is forced),
+    while a finger on its top face left of the corner rises with the planned motion and
+    would leave the block where it is: such a grasp cannot start the tip, however well
+    forces balance along it, and G_m refuses it at the first sample."""
+    world, gs = lift_world()
+    path = tip_right(3.0)
+    cand = candidates(world, gs, path)
+    one = cand[gs.n_touching[cand] == 1]
+    f = np.where(gs.touching[one, 0], 0, 1)
+    y = gs.contact[one, f, 1]
+    x = gs.contact[one, f, 0]
+    top = one[(np.abs(y - 150.0) < 1e-6) & (x > 5.0) & (x < 65.0)]
+    left = one[(np.abs(x) < 1e-6) & (y > 100.0)]
+    assert top.size and left.size
+    idle = grasps_module._leaves_it_still(world, gs, path, np.concatenate([top, left]))
+    assert idle[:top.size].mean() > 0.9  # (a free finger swinging into the block presses too)
+    assert not idle[top.size:].any()
+    res = motion_conditioned(world, gs, path, np.concatenate([top, left]), rate=False)
+    refused = top[idle[:top.size]]
+    assert not np.isin(refused, res.indices).any()
+    assert (res.rejected_at[np.isin(res.rejected, refused)] == 0).all()
+    assert np.isin(left, res.indices).any()
+    lifted = straight([0, 10, 0], [0, 30, 0])  # in the air the test does not apply: nothing rests
+    assert grasps_module._leaves_it_still(world, gs, lifted, one).sum() == 0
