@@ -26,12 +26,12 @@ Exit status 0 whatever the figures.
 
 Python's bytecode caches: a user's ``.pyc`` files exist (pip writes them; a checkout gets
 them on its first run), but not where ``PYTHONDONTWRITEBYTECODE`` is set, and then every
-run compiles the project's modules again (about 0.1 s of CPU per ``check``). The runs therefore use
-bytecode cached in a private folder (``PYTHONPYCACHEPREFIX``, written by one unmeasured
-run of each command), unless ``--no-bytecode-cache`` keeps the environment as it is. The
-CPU time (user + system) of each ``check`` and refusal run is printed beside the wall time,
-with the fastest run's wall time: on a machine that other work loads, they are the
-steadier figures.
+run compiles the project's modules again (about 0.1 s of CPU per ``check``). The runs
+therefore use bytecode cached in a private folder (``PYTHONPYCACHEPREFIX``, written by one
+unmeasured run of each command), unless ``--no-bytecode-cache`` keeps the environment as
+it is. The CPU time (user + system) of each ``check`` and refusal run is printed beside
+the wall time, with the fastest run's wall time: on a machine that other work loads, they
+are the steadier figures.
 """
 
 from __future__ import annotations
