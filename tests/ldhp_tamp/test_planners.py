@@ -133,7 +133,7 @@ def test_bench_cli_refuses_an_unknown_planner(tmp_path: Path, capsys: pytest.Cap
 
 
 def test_without_feedback_nothing_is_forbidden_and_the_symbolic_tier_replans_blind() -> None:
-    sc = load_scenario(scenarios_dir() / "gen_lift_concave11.toml")  # its first iterations fail
+    sc = load_scenario(scenarios_dir() / "task1_zero_mobility_lift.toml")  # its first iterations fail
     with_feedback = get_planner("ldhp")(sc, SolveOptions(max_top_iterations=2))
     blind = get_planner("ldhp-nofeedback")(sc, SolveOptions(max_top_iterations=2))
     assert with_feedback.plan.failure is not None and blind.plan.failure is not None
