@@ -218,12 +218,12 @@ def format_findings(rows: Sequence[BenchRow]) -> str:
             continue
         kinds: dict[str, int] = {}
         for r in failed:
-            head = r.reason.split(":")[0].split("(")[0].strip() or r.status.value
+            head = r.reason.split(":")[0].split(",")[0].split("(")[0].strip() or r.status.value  # the tier
             if r.status is BenchStatus.TIMEOUT:
                 head = "timeout"
             kinds[head] = kinds.get(head, 0) + 1
         common = sorted(kinds.items(), key=lambda kv: -kv[1])[:3]
-        out.append(f"- **{p}** fails {len(failed)} run(s); most often in: "
+        out.append(f"- **{p}** fails {len(failed)} run(s), by where it failed: "
                    + ", ".join(f"{k} ({v})" for k, v in common) + ".")
     diverged = [r for r in rows if r.status is BenchStatus.SOLVED and r.executes is False]
     out.append(f"- Solved plans that diverge in the physics simulation: {len(diverged)}"
