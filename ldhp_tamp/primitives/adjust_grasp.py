@@ -1291,7 +1291,8 @@ class Open(_AdjustGrasp):
       put (FIXED on its contact), the other opens to the destination's larger width, the
       gripper origin following at half the rate (the arm keeps finger k where it is). The
       object must stay still under finger k and the environment at every sample. Not for
-      a fixed-width gripper.
+      a fixed-width gripper. Likewise finger k alone -> finger k alone at a larger width
+      (the free finger moves away; the reverse of ``close``'s narrowing).
     """
 
     name = "open"
@@ -1304,9 +1305,10 @@ class Open(_AdjustGrasp):
         travel = _route_motion(ctx, pose, full, True).travel(ctx) if full.size else np.zeros(0)
         parts = [(full, z, z - 1, travel)]
         if not ctx.world.gripper.fixed_width:
-            two = src[gs.n_touching[src] == 2]
             for k in range(2):
-                pa, pb = _group_pairs(ctx.close_groups[k], two)
+                # both touching, or finger k alone, -> finger k alone at a larger width
+                from_k = src[(gs.n_touching[src] == 2) | ((gs.n_touching[src] == 1) & gs.touching[src, k])]
+                pa, pb = _group_pairs(ctx.close_groups[k], from_k)
                 keep = members[pb] & (gs.n_touching[pb] == 1) & gs.touching[pb, k] & (gs.width[pb] > gs.width[pa] + EPS)
                 pa, pb = pa[keep], pb[keep]
                 parts.append((pa, pb, np.full(pa.size, k, np.int64), 0.5 * (gs.width[pb] - gs.width[pa])))
@@ -1348,12 +1350,15 @@ class Open(_AdjustGrasp):
 
 @REGISTRY.register("close", Family.ADJUST_GRASP)
 class Close(_AdjustGrasp):
-    """``close``: one finger touching -> both touching, the touching finger fixed.
+    """``close``: one finger touching -> both touching, the touching finger fixed; or a
+    one-finger grasp narrowed with the other finger still free (a width change under a
+    finger that holds, to a grasp that another primitive needs: a pivot keeps the width).
 
     Finger k stays put (FIXED on its contact): the destination has the same anchor,
     contact and orientation for finger k (:attr:`AdjustContext.close_groups`) and a
     smaller width; the other finger closes from the source width to the destination
-    width, the gripper origin following at half the rate. Travel ``(w_s - w_d) / 2`` (the
+    width (FREE, off the object, until it touches at the end when it does), the gripper
+    origin following at half the rate. Travel ``(w_s - w_d) / 2`` (the
     mean of the two fingers'). Impossible for a fixed-width (zero-mobility) gripper. The
     "none touching" case is the closing leg of ``approach-contact``.
     """
@@ -1369,7 +1374,9 @@ class Close(_AdjustGrasp):
             for k in range(2):
                 s = src[(gs.n_touching[src] == 1) & gs.touching[src, k]]
                 pa, pb = _group_pairs(ctx.close_groups[k], s)
-                keep = members[pb] & (gs.n_touching[pb] == 2) & (gs.width[pb] < gs.width[pa] - EPS)
+                # onto the object, or nearer it with the other finger still free
+                keep = members[pb] & (gs.width[pb] < gs.width[pa] - EPS) & (
+                    (gs.n_touching[pb] == 2) | ((gs.n_touching[pb] == 1) & gs.touching[pb, k]))
                 parts.append((pa[keep], pb[keep], np.full(int(keep.sum()), k, dtype=np.int64)))
             a, b, f = (np.concatenate(x) for x in zip(*parts))
         return a, b, np.zeros(a.size, np.int64), f, 0.5 * (gs.width[a] - gs.width[b])
