@@ -724,7 +724,8 @@ class GraspPlanner:
                 timings["motion_sets"] = time.perf_counter() - t0
                 reason = (f"no grasp can execute segment {k} ({_describe(seg)}): none of the {n_cand} grasps "
                           f"collision-free at both ends (of {layers[k].size} at T_{k}) is collision-free and "
-                          f"quasi-statically feasible at all {seg.poses.shape[0]} samples"
+                          f"quasi-statically feasible at all {seg.poses.shape[0]} samples and able to start the "
+                          f"motion"
                           + (" (check budget ran out)" if mg.truncated else ""))
                 return GraspPlanResult(GraspPlanStatus.NO_GRASP_FOR_SEGMENT, failing_segment=k, reason=reason,
                                        candidates=n_cand,

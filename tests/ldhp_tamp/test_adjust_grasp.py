@@ -447,3 +447,29 @@ def test_open_lets_go_of_one_finger_the_reverse_of_close(poly: Case):
     assert len(kept) == 1 and None not in kept  # finger k never lets go
     assert step.waypoints[-1].finger_contacts[1 - k] is None
     assert gs.width[feasible.dst[i]] > gs.width[feasible.src[i]]
+
+
+def test_a_one_finger_grasp_changes_its_width_under_the_finger_that_holds(poly: Case):
+    """``close`` narrows and ``open`` widens a one-finger grasp keeping finger k on its
+    contact (the free finger moves, off the object): a pivot keeps the width, so this is
+    how a fingertip on a corner gets from one tip angle and width to another. The two are
+    each other's reverse; the free finger never touches, finger k never lets go."""
+    gs = poly.grasps
+    members = np.isin(np.arange(len(gs)), poly.gt)
+    one = poly.gt[gs.n_touching[poly.gt] == 1]
+    narrowed = ag.Close().propose(poly.ctx, T0, one, members)
+    both_one = gs.n_touching[narrowed.dst] == 1
+    assert both_one.any()
+    a, b = narrowed.src[both_one], narrowed.dst[both_one]
+    assert (gs.width[b] < gs.width[a]).all()
+    k = narrowed.finger[both_one]
+    assert np.allclose(gs.contact[a, k], gs.contact[b, k]) and (gs.touching[b, k]).all()
+    widened = ag.Open().propose(poly.ctx, T0, np.unique(b), members)
+    assert set(zip(b.tolist(), a.tolist())) <= set(zip(widened.src.tolist(), widened.dst.tolist()))
+    feasible = ag.Close().intra_edges(poly.ctx, T0, np.union1d(a, b))
+    sel = np.flatnonzero(gs.n_touching[feasible.dst] == 1)
+    assert sel.size
+    step = poly.step(ag.Close(), feasible, int(sel[0]))
+    f = int(feasible.finger[sel[0]])
+    assert len({w.finger_contacts[f] for w in step.waypoints}) == 1
+    assert all(w.finger_contacts[1 - f] is None for w in step.waypoints)
