@@ -51,6 +51,7 @@ __all__ = [
     "pose_conditioned",
     "motion_conditioned",
     "rate_motion_grasps",
+    "within_force_limit",
 ]
 
 logger = logging.getLogger(__name__)
@@ -1354,6 +1355,31 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     by = np.argsort(rej, kind="stable")
     return MotionGrasps(_ro(alive, np.int64), _ro(quality, float), _ro(closure, bool), _ro(alpha, float),
                         checks, truncated, _ro(rej[by], np.int64), _ro(rat[by], np.int64), rated=rate)
+
+
+def within_force_limit(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLike, max_force: float,
+                       options: MotionCheckOptions | None = None, max_samples: int = 32) -> BoolArray:
+    """(len(rows),) whether each grasp of ``rows`` carries the object along ``path`` with
+    every finger's normal force at most ``max_force`` (N) at every sample (up to
+    ``max_samples`` of them spread over the path, its ends included): the contacts and
+    modes of :func:`motion_conditioned`, one :func:`geometry.mechanics.bounded_support`
+    LP per (grasp, sample), the plan rule 9 of a move-object step. ``G_m`` itself leaves
+    the forces unbounded (the cone test is ~100x cheaper); a planner filters a segment's
+    set with this when a plan carrying one of its grasps broke the limit."""
+    opts = options or MotionCheckOptions()
+    p = np.asarray(path, dtype=float).reshape(-1, 3)
+    r = np.asarray(rows, dtype=np.int64).reshape(-1)
+    ok = np.ones(r.size, dtype=bool)
+    if not r.size or p.shape[0] == 0:
+        return ok
+    env = _env_contacts(world, p, opts.contact_tol)
+    samples = np.unique(np.round(np.linspace(0, p.shape[0] - 1, min(p.shape[0], max_samples))).astype(np.int64))
+    _, allc, com = _instances(world, grasps, r, p, env, samples)
+    c = env.points.shape[1]
+    finger_of = np.broadcast_to(np.concatenate([np.full(c, -1), [0, 1]]), (allc.batch, c + 2))
+    res = mechanics.bounded_support(allc, com, world.object.length_scale, world.object.weight, finger_of,
+                                    max_force, margin=0.0)
+    return np.asarray(res.feasible, dtype=bool).reshape(r.size, samples.size).all(axis=1)
 
 
 #: How far (mm of gripper travel) a one-finger grasp must push into an object resting on

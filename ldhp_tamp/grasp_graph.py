@@ -59,6 +59,7 @@ from geometry.grasps import (
     motion_conditioned,
     rate_motion_grasps,
     pose_conditioned,
+    within_force_limit,
 )
 from geometry.poses import BoolArray, IntArray, Pose, compose_batch, transform_points, wrap_angle
 from geometry.shapes import FloatArray, segment_distances
@@ -454,6 +455,7 @@ class GraspPlanner:
         # a layer's candidate edges, all primitives together (keyed by the _Cands objects)
         self._layer_graphs: OrderedDict[tuple[_Cands, ...], _LayerGraph] = OrderedDict()
         self._helper: Helper | None = None
+        self._force_bounded: set[tuple[str, bytes]] = set()  # segments whose G_m is force-bounded
 
     # ---- sets ------------------------------------------------------------------------
 
@@ -516,6 +518,7 @@ class GraspPlanner:
             self._start_index = starts if starts.size else np.array([NO_CONTACT])
         self._pose_sets.clear()
         self._motion_sets.clear()
+        self._force_bounded.clear()
         self._cands.clear()
         self._layer_graphs.clear()
         self.close()  # a helper holds the previous grasp set
@@ -609,6 +612,32 @@ class GraspPlanner:
                                           force_closure=mg.force_closure[keep], alpha=mg.alpha[keep],
                                           rejected=rejected[order], rejected_at=at[order]), n_cand)
         return True
+
+    def bound_forces(self, segment: Segment) -> int:
+        """Take out of ``segment``'s cached G_m every grasp that cannot carry the object
+        along it within the gripper's ``max_force`` (:func:`geometry.grasps.within_force_limit`):
+        a plan carrying one of them broke the force limit (plan rule 9), and G_m bounds no
+        force. Once per segment; returns how many grasps left (0 without a limit)."""
+        max_force = getattr(self.world.gripper, "max_force", None)
+        key = _motion_key(segment)
+        hit = self._motion_sets.get(key)
+        if max_force is None or hit is None or key in self._force_bounded:
+            return 0
+        self._force_bounded.add(key)
+        mg, n_cand = hit
+        keep = within_force_limit(self.world, self.grasps, segment.poses, mg.indices, max_force, self.options.motion)
+        if keep.all():
+            return 0
+        out = mg.indices[~keep]
+        rejected = np.concatenate([mg.rejected, out])
+        at = np.concatenate([mg.rejected_at, np.zeros(out.size, dtype=np.int64)])
+        order = np.argsort(rejected, kind="stable")
+        self._motion_sets[key] = (replace(mg, indices=mg.indices[keep], quality=mg.quality[keep],
+                                          force_closure=mg.force_closure[keep], alpha=mg.alpha[keep],
+                                          rejected=rejected[order], rejected_at=at[order]), n_cand)
+        log.info("force limit: %d of %d grasps of G_m need more than %g N along segment %s", out.size,
+                 mg.indices.size, max_force, _describe(segment))
+        return int(out.size)
 
     def _motion_inputs(self, segment: Segment) -> tuple[IntArray, int, IntArray, IntArray, tuple[int, ...]]:
         """What :func:`motion_conditioned` is given for ``segment``: the candidates

@@ -645,6 +645,13 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
                 return _BottomOutcome(steps=steps)
             assert verdict.step is not None
             k, carried = _segment_of_step(steps, verdict.step)
+            if carried and verdict.summary.endswith("breaks rule 9") and planner.bound_forces(segments[k]):
+                # the force limit, which G_m does not bound: every grasp of the segment's
+                # G_m that needs more leaves it at once (not one judge round each)
+                rejected += 1
+                log.info("segment %d: the grasps that need more than the force limit leave its G_m; "
+                         "planning the path again", k)
+                continue
             if carried and rejected < retries and planner.reject_carry(segments[k], res.grasps[k]):
                 rejected += 1
                 log.info("grasp %d no longer carries segment %d; planning the path again", res.grasps[k], k)

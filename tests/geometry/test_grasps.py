@@ -22,6 +22,7 @@ from geometry.grasps import (
     enumerate_grasps,
     motion_conditioned,
     pose_conditioned,
+    within_force_limit,
 )
 from geometry import grasps as grasps_module
 from geometry.poses import Pose
@@ -758,3 +759,17 @@ def test_a_finger_that_would_rise_off_a_resting_block_cannot_start_its_tip() -> 
     assert np.isin(left, res.indices).any()
     lifted = straight([0, 10, 0], [0, 30, 0])  # in the air the test does not apply: nothing rests
     assert grasps_module._leaves_it_still(world, gs, lifted, one).sum() == 0
+
+
+def test_a_pinch_lift_within_the_force_limit_needs_weight_over_two_mu() -> None:
+    """A lift by a pinch of the 70 mm sides (mu_g = 0.6): friction carries the weight W, so
+    each finger presses with W / (2 mu_g) at least. Under that limit no grasp is within it;
+    at twice that the square-on pinches are."""
+    world, gs = lift_world()
+    path = straight([0, 100, 0], [0, 140, 0])
+    cand = candidates(world, gs, path)
+    across = cand[(np.sort(gs.feature[cand], axis=1) == [1, 3]).all(axis=1) & (np.abs(gs.gripper[cand, 2]) < 1e-9)]
+    assert across.size
+    need = world.object.weight / (2 * 0.6)
+    assert not within_force_limit(world, gs, path, across, 0.9 * need).any()
+    assert within_force_limit(world, gs, path, across, 2.0 * need).all()

@@ -373,3 +373,28 @@ def test_the_helper_process_changes_no_grasp_plan_and_ends_with_close():
             planner.close()
         assert planner._helper is None
     assert out[True] == out[False]
+
+
+def test_a_force_limit_the_judge_met_leaves_a_segments_set_at_once(pick: Scenario, pick_grasps) -> None:
+    """G_m bounds no force; after a plan broke the gripper's force limit along a segment,
+    ``bound_forces`` takes out of that segment's G_m every grasp that needs more (a pinch
+    lifting the block needs W / (2 mu_g) per finger), once; without a limit it does
+    nothing."""
+    import dataclasses
+
+    need = pick.world.object.weight / (2 * pick.world.friction.gripper)
+    for limit, left in ((0.5 * need, 0), (None, None)):
+        world = dataclasses.replace(pick.world, gripper=dataclasses.replace(pick.world.gripper, max_force=limit))
+        seg = lift(world, pick.start, 100.0)
+        planner = GraspPlanner(world, pick_grasps, bindings(), pick.start_grasp, pick.goal_release)
+        planner.prepare(seg.poses[0])
+        before = len(planner.motion_grasps(seg)[0])
+        assert before > 0
+        removed = planner.bound_forces(seg)
+        after = len(planner.motion_grasps(seg)[0])
+        if limit is None:
+            assert removed == 0 and after == before
+        else:
+            assert removed == before and after == left
+            assert planner.bound_forces(seg) == 0  # once
+            assert planner.plan(PosePath((seg,))).status is GraspPlanStatus.NO_GRASP_FOR_SEGMENT
