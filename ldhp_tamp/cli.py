@@ -122,8 +122,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
-    """Plan for a scenario; write the plan (solved or failed) and print a summary."""
+    """Plan for a scenario; write the plan (solved or failed) and print a summary. The
+    objects that exist at exit are left out of the interpreter's last collections, as for
+    ``check`` (a solve leaves millions of them: 0.2-0.3 s of the command's wall time)."""
     from pathlib import Path
+
+    atexit.unregister(gc.freeze)  # once, however many times main() runs in this process
+    atexit.register(gc.freeze)
 
     from ldhp_tamp.scenario import load_scenario
 
