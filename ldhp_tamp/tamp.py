@@ -21,6 +21,7 @@ import contextlib
 import enum
 import logging
 import re
+import weakref
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -704,6 +705,10 @@ def _window_before(segments: Sequence[Segment], k: int, per_root: dict[int, int]
     return None
 
 
+#: Which samples of a segment rest alone (:func:`_window_cut`), computed once per segment.
+_RESTS: "weakref.WeakKeyDictionary[Segment, np.ndarray]" = weakref.WeakKeyDictionary()
+
+
 def _window_cut(seg: Segment) -> int | None:
     """The middle of the longest run of samples of ``seg`` at which the object rests on
     the environment alone (``REST_FRICTION``) that touches neither end of it (a run at
@@ -711,7 +716,9 @@ def _window_cut(seg: Segment) -> int | None:
     poses = np.asarray(seg.poses, dtype=float)
     if poses.shape[0] < 3:
         return None
-    rests = rests_alone(seg.world, poses, REST_FRICTION)
+    rests = _RESTS.get(seg)
+    if rests is None:
+        rests = _RESTS[seg] = rests_alone(seg.world, poses, REST_FRICTION)
     edges = np.diff(np.concatenate([[0], rests.astype(np.int8), [0]]))
     runs = [(a, b) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))
             if a > 0 and b < poses.shape[0]]
