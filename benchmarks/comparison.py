@@ -265,7 +265,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from ldhp_tamp.planners import planner_names
 
-    command = "benchmarks/comparison.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    given = list(argv if argv is not None else sys.argv[1:])
+    if "--note" in given:  # the note is shown on its own
+        i = given.index("--note")
+        del given[i:i + 2]
+    command = "benchmarks/comparison.py " + " ".join(given)
     if args.from_runs is not None:
         merged: dict[tuple, BenchRow] = {}
         for path in args.from_runs:

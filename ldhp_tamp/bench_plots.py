@@ -181,7 +181,7 @@ def plot_comparison(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str],
 
     from ldhp_tamp.bench import quartiles, wilson_interval
 
-    scenarios = list(dict.fromkeys(r.scenario for r in rows))
+    scenarios = sorted({r.scenario for r in rows})
     engines = {r.engine for r in rows if r.engine}
 
     def series_of(r: BenchRow) -> str:
@@ -190,8 +190,8 @@ def plot_comparison(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str],
     series = list(dict.fromkeys(series_of(r) for r in rows))
     width = 0.8 / len(series)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    fig, (ax_s, ax_t) = plt.subplots(2, 1, figsize=(max(7.0, 1.1 * len(scenarios) * max(1, len(series)) ** 0.5 + 3),
-                                                     7.5), constrained_layout=True, sharex=True)
+    fig, (ax_s, ax_t) = plt.subplots(2, 1, figsize=(min(16.0, max(7.0, 0.8 * len(scenarios) + 3)), 7.5),
+                                     constrained_layout=True, sharex=True)
     times: list[float] = []
     for j, name in enumerate(series):
         colour = colours[j % len(colours)]
