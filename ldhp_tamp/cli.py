@@ -265,11 +265,15 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+#: :data:`ldhp_tamp.sweep.EXECUTORS`, named here so that building the parser (every
+#: command, ``check`` and ``--help`` included) does not import the sweep module and
+#: multiprocessing (a test keeps the two equal).
+_EXECUTORS = ("local", "dask")
+
+
 def _add_executor(p: argparse.ArgumentParser) -> None:
     """``--executor`` and ``--scheduler`` of bench and ablate (:mod:`ldhp_tamp.sweep`)."""
-    from ldhp_tamp.sweep import EXECUTORS
-
-    p.add_argument("--executor", choices=EXECUTORS, default="local",
+    p.add_argument("--executor", choices=_EXECUTORS, default="local",
                    help="where the cells run: 'local' processes (default) or 'dask' (one task per cell; "
                         "needs pip install 'ldhp-tamp[dask]'); see docs/benchmarks.md")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",

@@ -302,3 +302,11 @@ def test_ablation_on_dask_and_resumed(cluster: distributed.LocalCluster, tmp_pat
     made.clear()
     ablate([PICK], options, progress, csv_path=out, resume=True)
     assert made == []  # all done
+
+
+def test_the_cli_offers_the_sweep_executors() -> None:
+    """The parser names the executors without importing the sweep module."""
+    from ldhp_tamp import cli
+    from ldhp_tamp.sweep import EXECUTORS
+
+    assert tuple(cli._EXECUTORS) == tuple(EXECUTORS)
