@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry import collision, contacts, mechanics
 from geometry.errors import GeometryError
-from geometry.poses import BoolArray, IntArray, Pose, compose_batch, wrap_angle
+from geometry.poses import BoolArray, IntArray, Pose, compose_batch, transform_points, wrap_angle
 from geometry.shapes import FloatArray, Polygon
 from geometry.tolerances import CONTACT_TOL, EPS, GRASP_OBJECT_TOL, PENETRATION_TOL
 from geometry.world import PolylineGripper, TwoPointGripper, World
@@ -1075,22 +1075,21 @@ def _env_contacts(world: World, path: FloatArray, contact_tol: float) -> _EnvCon
     here = np.arange(s)
     there = np.where(here < s - 1, here + 1, max(s - 2, 0))
     sign = np.where(here < s - 1, 1.0, -1.0)
+    verts = transform_points(path, world.object.polygon.vertices)  # (S, n, 2)
     disp, rot = mechanics.pose_displacements(pts, path[here], path[there])
-    disp = _edge_vertex_displacements(world, path, pts, disp, here, there, contact_tol) * sign[:, None, None]
+    disp = _edge_vertex_displacements(world, path, verts, pts, disp, here, there, contact_tol) * sign[:, None, None]
     rot = rot * sign
-    prv = np.minimum(here, max(s - 2, 0))
-    nxt = np.minimum(prv + 1, s - 1)
     modes = mechanics.classify_contacts(nrm, disp, rot[:, None], world.object.length_scale, present=live)
     codes = np.array(modes.codes, dtype=np.int8, copy=True)
     if s > 1:
         made = codes[-1] == mechanics.ContactMode.PENETRATING
         codes[-1, made] = mechanics.ContactMode.STICKING
-        _corner_separations(world, path, pts, codes, nxt, contact_tol)
+        _corner_separations(world, path, verts, pts, codes, there, contact_tol)
     return _EnvContacts(pts, nrm, mu, codes, np.asarray(modes.slide_dirs))
 
 
-def _edge_vertex_displacements(world: World, path: FloatArray, pts: FloatArray, disp: FloatArray, here: IntArray,
-                               there: IntArray, contact_tol: float) -> FloatArray:
+def _edge_vertex_displacements(world: World, path: FloatArray, verts: FloatArray, pts: FloatArray, disp: FloatArray,
+                               here: IntArray, there: IntArray, contact_tol: float) -> FloatArray:
     """``disp`` with the displacements at environment-vertex-on-object-edge contacts
     measured in the object edge's own frame. There the normal is the object edge's and
     turns with the object: the world displacement of the object's material point at the
@@ -1103,7 +1102,6 @@ def _edge_vertex_displacements(world: World, path: FloatArray, pts: FloatArray, 
     if not env_v.size:
         return disp
     at_env = np.linalg.norm(pts[:, :, None, :] - env_v[None, None, :, :], axis=3).min(axis=2) <= contact_tol
-    verts = _world_vertices(world, path)
     at_obj = np.linalg.norm(pts[:, :, None, :] - verts[:, None, :, :], axis=3).min(axis=2) <= contact_tol
     ev = at_env & ~at_obj
     if not ev.any():
@@ -1124,8 +1122,8 @@ def _edge_vertex_displacements(world: World, path: FloatArray, pts: FloatArray, 
     return out
 
 
-def _corner_separations(world: World, path: FloatArray, pts: FloatArray, codes: NDArray[np.int8],
-                        nxt: IntArray, contact_tol: float) -> None:
+def _corner_separations(world: World, path: FloatArray, verts: FloatArray, pts: FloatArray,
+                        codes: NDArray[np.int8], nxt: IntArray, contact_tol: float) -> None:
     """In place: a contact at an object vertex sitting on an environment vertex has no
     single normal (the one reported is one edge's), so "penetrating" along it says
     nothing; whether the motion pushes into the environment there is the polygons'
@@ -1135,8 +1133,7 @@ def _corner_separations(world: World, path: FloatArray, pts: FloatArray, codes: 
     if not pen.any():
         return
     j, k = np.nonzero(pen)
-    verts = _world_vertices(world, path[j])
-    at_obj = np.linalg.norm(verts - pts[j, k][:, None, :], axis=2).min(axis=1) <= contact_tol
+    at_obj = np.linalg.norm(verts[j] - pts[j, k][:, None, :], axis=2).min(axis=1) <= contact_tol
     env_v = world.environment.vertices
     at_env = np.linalg.norm(env_v[None, :, :] - pts[j, k][:, None, :], axis=2).min(axis=1) <= contact_tol
     corner = at_obj & at_env
@@ -1145,14 +1142,6 @@ def _corner_separations(world: World, path: FloatArray, pts: FloatArray, codes: 
     j, k = j[corner], k[corner]
     free = ~collision.object_env_overlap(world, path[nxt[j]])
     codes[j[free], k[free]] = mechanics.ContactMode.SEPARATING
-
-
-def _world_vertices(world: World, poses: FloatArray) -> FloatArray:
-    """The object's vertices (B, n, 2) in the world at each pose (B, 3)."""
-    v = world.object.polygon.vertices
-    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-    return np.stack([c * v[None, :, 0] - s * v[None, :, 1] + poses[:, None, 0],
-                     s * v[None, :, 0] + c * v[None, :, 1] + poses[:, None, 1]], axis=-1)
 
 
 def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray, env: _EnvContacts,
@@ -1386,7 +1375,7 @@ def within_force_limit(world: World, grasps: GraspSet, path: ArrayLike, rows: Ar
 #: the environment alone at a segment's start for the motion to be forced, and the most
 #: samples looked at (the judge's "the object may stay", ldhp_tamp.executability).
 STAY_TRAVEL = 10.0
-_STAY_SAMPLES = 8
+STAY_SAMPLES = 8
 
 
 def _leaves_it_still(world: World, grasps: GraspSet, p: FloatArray, cand: IntArray) -> BoolArray:
@@ -1405,7 +1394,7 @@ def _leaves_it_still(world: World, grasps: GraspSet, p: FloatArray, cand: IntArr
     if not one.size or not contacts.rests_alone(world, p[:1])[0]:
         return out
     rows = cand[one]
-    m = min(p.shape[0] - 1, _STAY_SAMPLES)
+    m = min(p.shape[0] - 1, STAY_SAMPLES)
     grip = compose_batch(p[:m + 1][None, :, :], grasps.gripper[rows][:, None, :])  # (A, m + 1, 3)
     travel = np.cumsum(np.linalg.norm(np.diff(grip[:, :, :2], axis=1), axis=2), axis=1)  # (A, m)
     pushed = np.zeros(rows.size, dtype=bool)

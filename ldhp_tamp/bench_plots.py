@@ -19,6 +19,7 @@ import os
 import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 from pathlib import Path
 
 from ldhp_tamp.bench import BenchRow, BenchStatus
@@ -152,13 +153,7 @@ def plot_scaling(rows: Sequence[BenchRow], axis: Axis, out_dir: str | os.PathLik
     labels.append("one solved run (line: median)")
     panels[0].legend(handles, labels, fontsize=8, loc="best")
     fig.suptitle(axis.title)
-    out = Path(out_dir)
-    paths = (out / f"{axis.stem}.png", out / f"{axis.stem}.svg")
-    for path in paths:
-        with atomic_output(path, binary=True) as (f, _tmp):
-            fig.savefig(f, format=path.suffix[1:], dpi=150)
-    plt.close(fig)
-    return paths
+    return _save(fig, out_dir, axis.stem)
 
 
 COMPARISON = "comparison"
@@ -236,6 +231,14 @@ def plot_comparison(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str],
     ax_t.set_xticks(range(len(scenarios)), scenarios, rotation=30, ha="right", fontsize=8)
     seeds = len({r.seed for r in rows})
     fig.suptitle(f"Planners compared ({seeds} seed{'s' if seeds != 1 else ''} per scenario)")
+    return _save(fig, out_dir, stem)
+
+
+def _save(fig: Any, out_dir: str | os.PathLike[str], stem: str) -> tuple[Path, Path]:
+    """Write ``fig`` as ``stem.png`` and ``stem.svg`` in ``out_dir`` (each file whole or
+    not at all) and close it."""
+    import matplotlib.pyplot as plt
+
     out = Path(out_dir)
     paths = (out / f"{stem}.png", out / f"{stem}.svg")
     for path in paths:

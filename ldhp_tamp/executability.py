@@ -30,6 +30,11 @@ import numpy as np
 
 from geometry import collision, mechanics
 from geometry.forward import MAX_CONTACTS, alternative_motions, screw_velocity
+# How far ahead (finger travel, mm; and waypoints) the fingers must push into an object
+# that stays put for a planned object motion to be forced (:func:`_object_may_stay`):
+# the bottom tier's G_m makes the same test at a segment's start, with the same bounds.
+from geometry.grasps import STAY_SAMPLES as _STAY_AHEAD
+from geometry.grasps import STAY_TRAVEL
 from geometry.poses import BoolArray, transform_points, wrap_angle
 from geometry.shapes import FloatArray
 from geometry.tolerances import PENETRATION_TOL
@@ -78,12 +83,6 @@ def _describe(labels: tuple[str, ...], modes: np.ndarray, twist: FloatArray) -> 
     turn = np.degrees(twist[2])
     return (f"the same finger motion also lets the object move by ({twist[0]:.2f}, {twist[1]:.2f}) mm and "
             f"{turn:.2f} deg ({', '.join(what) or 'every contact lets go'}), a motion that balances too")
-
-
-#: How far ahead (finger travel, mm; and waypoints) the fingers must push into an object
-#: that stays put for a planned object motion to be forced (:func:`_object_may_stay`).
-STAY_TRAVEL = 10.0
-_STAY_AHEAD = 8
 
 
 def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: FloatArray, squeeze: BoolArray

@@ -601,17 +601,22 @@ class GraspPlanner:
         hit = self._motion_sets.get(key)
         if hit is None:
             return False
-        mg, n_cand = hit
-        keep = mg.indices != grasp
-        if keep.all():
-            return False
-        rejected = np.concatenate([mg.rejected, [grasp]])
-        at = np.concatenate([mg.rejected_at, [0]])
+        return self._drop(key, hit[0].indices == grasp) > 0
+
+    def _drop(self, key: tuple[str, bytes], out: BoolArray) -> int:
+        """Move the grasps of the cached G_m under ``key`` marked in ``out`` (aligned with
+        its indices) to its rejected ones (at sample 0); returns how many."""
+        mg, n_cand = self._motion_sets[key]
+        if not out.any():
+            return 0
+        keep = ~out
+        rejected = np.concatenate([mg.rejected, mg.indices[out]])
+        at = np.concatenate([mg.rejected_at, np.zeros(int(out.sum()), dtype=np.int64)])
         order = np.argsort(rejected, kind="stable")
         self._motion_sets[key] = (replace(mg, indices=mg.indices[keep], quality=mg.quality[keep],
                                           force_closure=mg.force_closure[keep], alpha=mg.alpha[keep],
                                           rejected=rejected[order], rejected_at=at[order]), n_cand)
-        return True
+        return int(out.sum())
 
     def bound_forces(self, segment: Segment) -> int:
         """Take out of ``segment``'s cached G_m every grasp that cannot carry the object
@@ -624,20 +629,13 @@ class GraspPlanner:
         if max_force is None or hit is None or key in self._force_bounded:
             return 0
         self._force_bounded.add(key)
-        mg, n_cand = hit
-        keep = within_force_limit(self.world, self.grasps, segment.poses, mg.indices, max_force, self.options.motion)
-        if keep.all():
-            return 0
-        out = mg.indices[~keep]
-        rejected = np.concatenate([mg.rejected, out])
-        at = np.concatenate([mg.rejected_at, np.zeros(out.size, dtype=np.int64)])
-        order = np.argsort(rejected, kind="stable")
-        self._motion_sets[key] = (replace(mg, indices=mg.indices[keep], quality=mg.quality[keep],
-                                          force_closure=mg.force_closure[keep], alpha=mg.alpha[keep],
-                                          rejected=rejected[order], rejected_at=at[order]), n_cand)
-        log.info("force limit: %d of %d grasps of G_m need more than %g N along segment %s", out.size,
-                 mg.indices.size, max_force, _describe(segment))
-        return int(out.size)
+        mg = hit[0]
+        ok = within_force_limit(self.world, self.grasps, segment.poses, mg.indices, max_force, self.options.motion)
+        removed = self._drop(key, ~ok)
+        if removed:
+            log.info("force limit: %d of %d grasps of G_m need more than %g N along segment %s", removed,
+                     mg.indices.size, max_force, _describe(segment))
+        return removed
 
     def _motion_inputs(self, segment: Segment) -> tuple[IntArray, int, IntArray, IntArray, tuple[int, ...]]:
         """What :func:`motion_conditioned` is given for ``segment``: the candidates

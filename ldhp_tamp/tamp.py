@@ -588,16 +588,8 @@ def _rest_cut(seg: Segment) -> int | None:
     coefficient), so that the gripper can let go and regrasp there (``open``,
     ``approach-contact``: windows a fraction of a degree wide are found from the statics
     of the segment's own samples); ``None`` (the middle of the range) when there is none."""
-    poses = np.asarray(seg.poses, dtype=float)
-    if poses.shape[0] < 3:
-        return None
-    rests = rests_alone(seg.world, poses[1:-1], REST_FRICTION)
-    if not rests.any():
-        return None
-    edges = np.diff(np.concatenate([[0], rests.astype(np.int8), [0]]))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    longest = int(np.argmax(ends - starts))
-    return 1 + (int(starts[longest]) + int(ends[longest]) - 1) // 2
+    n = seg.poses.shape[0]
+    return _middle_of_longest([(max(a, 1), min(b, n - 1)) for a, b in _rest_runs(seg) if min(b, n - 1) > max(a, 1)])
 
 
 @dataclass(frozen=True)
@@ -713,19 +705,31 @@ def _window_cut(seg: Segment) -> int | None:
     """The middle of the longest run of samples of ``seg`` at which the object rests on
     the environment alone (``REST_FRICTION``) that touches neither end of it (a run at
     an end is a layer of the grasp graph already); ``None`` if there is none."""
+    n = seg.poses.shape[0]
+    return _middle_of_longest([(a, b) for a, b in _rest_runs(seg) if a > 0 and b < n])
+
+
+def _rest_runs(seg: Segment) -> list[tuple[int, int]]:
+    """The runs ``[a, b)`` of samples of ``seg`` at which the object rests on the
+    environment alone with ``REST_FRICTION`` of every coefficient (none for a segment of
+    fewer than 3 samples: it has no interior); computed once per segment."""
     poses = np.asarray(seg.poses, dtype=float)
     if poses.shape[0] < 3:
-        return None
+        return []
     rests = _RESTS.get(seg)
     if rests is None:
         rests = _RESTS[seg] = rests_alone(seg.world, poses, REST_FRICTION)
     edges = np.diff(np.concatenate([[0], rests.astype(np.int8), [0]]))
-    runs = [(a, b) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))
-            if a > 0 and b < poses.shape[0]]
+    return [(int(a), int(b)) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+
+
+def _middle_of_longest(runs: list[tuple[int, int]]) -> int | None:
+    """The middle sample of the longest run ``[a, b)`` (the first of equals); ``None``
+    without runs."""
     if not runs:
         return None
     a, b = max(runs, key=lambda r: r[1] - r[0])
-    return (int(a) + int(b) - 1) // 2
+    return (a + b - 1) // 2
 
 
 def _root(seg: Segment) -> Segment:
