@@ -118,7 +118,8 @@ def _rows(points: FloatArray, normals: FloatArray, com: FloatArray) -> tuple[Flo
 def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, present: ArrayLike,
                         other_velocity: ArrayLike, com: ArrayLike, length_scale: float,
                         planned_twist: ArrayLike, *, relative_tol: float = 1e-3,
-                        same_tol: float = 0.02) -> ForwardCheck:
+                        same_tol: float = 0.02, pressed: ArrayLike | None = None,
+                        press_group: ArrayLike | None = None) -> ForwardCheck:
     """Whether the commanded motion admits another consistent object motion.
 
     Parameters
@@ -142,6 +143,17 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
     same_tol : float
         A twist within ``same_tol`` times the motion's scale of the planned one (per
         component, rotations times ``length_scale``) is the planned motion.
+    pressed : array_like, shape (B, C), optional
+        Per contact, the normal force a press holds it at, in units of the object's
+        weight; ``nan`` (the default for all) for a contact that is not pressed. A
+        pressed finger follows the object along its normal (the executor pressed it to
+        that force and its compliance keeps it there): its contact takes no normal
+        equation and never separates; STICKING adds ``r . t = 0``, SLIDING nothing; its
+        force is ``pressed`` along ``n`` plus friction within the mode's cone.
+    press_group : array_like of int, shape (B, C), optional
+        Which pressed contacts belong to one finger (the same id, ``0 .. G-1``): the
+        press holds their normal forces' *sum* at the (common) ``pressed`` value. By
+        default each pressed contact is a finger of its own.
 
     Returns
     -------
@@ -170,6 +182,9 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
     w = np.broadcast_to(np.asarray(other_velocity, dtype=float), (b, c, 2))
     cm = np.broadcast_to(np.asarray(com, dtype=float).reshape(-1, 2), (b, 2))
     plan = np.broadcast_to(np.asarray(planned_twist, dtype=float).reshape(-1, 3), (b, 3))
+    press = np.full((b, c), np.nan) if pressed is None else np.broadcast_to(np.asarray(pressed, dtype=float), (b, c))
+    grp_id = (np.broadcast_to(np.arange(c), (b, c)) if press_group is None
+              else np.broadcast_to(np.asarray(press_group, dtype=np.int64), (b, c)))
     count = live.sum(axis=1)
     if (count > MAX_CONTACTS).any():
         raise GeometryError(f"forward: at most {MAX_CONTACTS} contacts per waypoint, got {int(count.max())}")
@@ -177,7 +192,8 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
     order = np.argsort(~live, axis=1, kind="stable")[:, :MAX_CONTACTS]
     k = min(c, MAX_CONTACTS)
     take = lambda a: np.take_along_axis(a, order[..., None] if a.ndim == 3 else order, axis=1)  # noqa: E731
-    p, n, m, live, w = take(p), take(n), take(m), take(live), take(w)
+    p, n, m, live, w, press, grp_id = take(p), take(n), take(m), take(live), take(w), take(press), take(grp_id)
+    is_pressed = np.isfinite(press) & live
     rn, rt = _rows(p, n, cm)
     wn = (w * n).sum(-1)
     tvec = np.stack([-n[..., 1], n[..., 0]], axis=-1)
@@ -191,49 +207,69 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
     ambiguous = np.zeros(b, dtype=bool)
     found_twist = np.zeros((b, 3))
     found_modes = np.zeros((b, c), dtype=np.int8)
-    for assign in itertools.product((_FREE, _STICK, _SLIDE), repeat=k):
-        a = np.asarray(assign, dtype=np.int8)
-        # padding slots must be FREE; instances with fewer contacts take the prefix
-        valid = ~((a[None, :] != _FREE) & ~live).any(axis=1) & ~ambiguous
-        stick, slide = a == _STICK, a == _SLIDE
-        n_eq = 2 * int(stick.sum()) + int(slide.sum())
-        if n_eq < 3 or not valid.any():
-            continue
-        idx = np.flatnonzero(valid)
-        A = np.concatenate([rn[idx][:, stick | slide], rt[idx][:, stick]], axis=1)  # (b', n_eq, 3)
-        y = np.concatenate([wn[idx][:, stick | slide], wt[idx][:, stick]], axis=1)
-        # least squares per instance; rank must be 3
-        sv = np.linalg.svd(A, compute_uv=False)
-        ok = sv[:, 2] > _RANK_TOL * np.maximum(sv[:, 0], 1e-300)
-        if not ok.any():
-            continue
-        idx, A, y = idx[ok], A[ok], y[ok]
-        xi = np.linalg.solve(np.einsum("bki,bkj->bij", A, A), np.einsum("bki,bk->bi", A, y)[..., None])[..., 0]
-        resid = np.abs(np.einsum("bki,bi->bk", A, xi) - y).max(axis=1)
-        t0 = tol[idx]
-        r_n = np.einsum("bci,bi->bc", rn[idx], xi) - wn[idx]
-        r_t = np.einsum("bci,bi->bc", rt[idx], xi) - wt[idx]
-        lv = live[idx]
-        cons = resid <= t0
-        cons &= ~((r_n < -t0[:, None]) & lv).any(axis=1)  # nothing penetrates
-        cons &= ~(slide[None, :] & (np.abs(r_t) <= t0[:, None])).any(axis=1)  # sliding slides
-        differs = (np.abs((xi - plan[idx]) * weights) > same_tol * scale[idx, None]).any(axis=1)
-        cons &= differs
-        if not cons.any():
-            continue
-        idx, xi, r_t = idx[cons], xi[cons], r_t[cons]
-        modes = np.where(live[idx], np.where(stick, mechanics.ContactMode.STICKING,
-                                             np.where(slide, mechanics.ContactMode.SLIDING,
-                                                      mechanics.ContactMode.SEPARATING)),
-                         mechanics.ContactMode.ABSENT).astype(np.int8)
-        sdir = np.where((slide[None, :] & live[idx])[..., None], np.sign(r_t)[..., None] * tvec[idx], 0.0)
-        contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
-                                              np.where(live[idx], m[idx], 0.0), modes, sdir)
-        feas = mechanics.feasible_batch(contacts, cm[idx], L, margin=0.0)
-        hit = idx[feas]
-        ambiguous[hit] = True
-        found_twist[hit] = xi[feas]
-        back = np.zeros((hit.size, c), dtype=np.int8)
-        np.put_along_axis(back, order[hit], modes[feas], axis=1)  # back to the caller's columns
-        found_modes[hit] = back
+    # instances grouped by which (ordered) slots are pressed: the equations differ
+    patterns, group = np.unique(is_pressed, axis=0, return_inverse=True)
+    group = np.asarray(group).reshape(-1)
+    for gi, pr in enumerate(patterns):
+        in_group = group == gi
+        for assign in itertools.product((_FREE, _STICK, _SLIDE), repeat=k):
+            a = np.asarray(assign, dtype=np.int8)
+            if (pr & (a == _FREE)).any():  # a pressed finger keeps touching
+                continue
+            # padding slots must be FREE; instances with fewer contacts take the prefix
+            valid = in_group & ~((a[None, :] != _FREE) & ~live).any(axis=1) & ~ambiguous
+            stick, slide = a == _STICK, a == _SLIDE
+            normal_eq = (stick | slide) & ~pr
+            n_eq = int(normal_eq.sum()) + int(stick.sum())
+            if n_eq < 3 or not valid.any():
+                continue
+            idx = np.flatnonzero(valid)
+            A = np.concatenate([rn[idx][:, normal_eq], rt[idx][:, stick]], axis=1)  # (b', n_eq, 3)
+            y = np.concatenate([wn[idx][:, normal_eq], wt[idx][:, stick]], axis=1)
+            # least squares per instance; rank must be 3
+            sv = np.linalg.svd(A, compute_uv=False)
+            ok = sv[:, 2] > _RANK_TOL * np.maximum(sv[:, 0], 1e-300)
+            if not ok.any():
+                continue
+            idx, A, y = idx[ok], A[ok], y[ok]
+            xi = np.linalg.solve(np.einsum("bki,bkj->bij", A, A), np.einsum("bki,bk->bi", A, y)[..., None])[..., 0]
+            resid = np.abs(np.einsum("bki,bi->bk", A, xi) - y).max(axis=1)
+            t0 = tol[idx]
+            r_n = np.einsum("bci,bi->bc", rn[idx], xi) - wn[idx]
+            r_t = np.einsum("bci,bi->bc", rt[idx], xi) - wt[idx]
+            lv = live[idx]
+            cons = resid <= t0
+            cons &= ~((r_n < -t0[:, None]) & lv & ~pr[None, :]).any(axis=1)  # nothing penetrates
+            cons &= ~(slide[None, :] & (np.abs(r_t) <= t0[:, None])).any(axis=1)  # sliding slides
+            differs = (np.abs((xi - plan[idx]) * weights) > same_tol * scale[idx, None]).any(axis=1)
+            cons &= differs
+            if not cons.any():
+                continue
+            idx, xi, r_t = idx[cons], xi[cons], r_t[cons]
+            modes = np.where(live[idx], np.where(stick, mechanics.ContactMode.STICKING,
+                                                 np.where(slide, mechanics.ContactMode.SLIDING,
+                                                          mechanics.ContactMode.SEPARATING)),
+                             mechanics.ContactMode.ABSENT).astype(np.int8)
+            sdir = np.where((slide[None, :] & live[idx])[..., None], np.sign(r_t)[..., None] * tvec[idx], 0.0)
+            contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
+                                                  np.where(live[idx], m[idx], 0.0), modes, sdir)
+            if pr.any():
+                # one "finger" per press group; its force the group's pressed value
+                gid = grp_id[idx]
+                ids = np.unique(gid[:, pr])
+                finger_of = np.where(pr[None, :], np.searchsorted(ids, gid), -1)
+                held = np.full((idx.size, ids.size), np.nan)
+                for j, g in enumerate(ids):
+                    top = np.where(pr[None, :] & (gid == g), press[idx], -np.inf).max(axis=1)
+                    held[:, j] = np.where(np.isfinite(top), top, np.nan)
+                feas = mechanics.bounded_support(contacts, cm[idx], L, 1.0, finger_of, None, margin=0.0,
+                                                 fingers=ids.size, pressed=held).feasible
+            else:
+                feas = mechanics.feasible_batch(contacts, cm[idx], L, margin=0.0)
+            hit = idx[feas]
+            ambiguous[hit] = True
+            found_twist[hit] = xi[feas]
+            back = np.zeros((hit.size, c), dtype=np.int8)
+            np.put_along_axis(back, order[hit], modes[feas], axis=1)  # back to the caller's columns
+            found_modes[hit] = back
     return ForwardCheck(ambiguous, found_twist, found_modes)

@@ -1177,11 +1177,12 @@ class BoundedSupport:
     max_finger_force: FloatArray
 
 
-def _lp_block(G: FloatArray, A: FloatArray, ub: FloatArray) -> FloatArray | None:
+def _lp_block(G: FloatArray, A: FloatArray, ub: FloatArray, fixed: FloatArray | None = None) -> FloatArray | None:
     """Solve ``min sum_b t_b : G_b lam_b = e_y, A_b lam_b <= t_b, 0 <= lam_b <= ub_b``
     for a chunk at once (the instances decouple: one block-diagonal LP). ``G`` is
-    (b, 3, K), ``A`` (b, F, K) and ``ub`` (b, K). Returns ``lam`` (b, K) or ``None``
-    when HiGHS does not report an optimum."""
+    (b, 3, K), ``A`` (b, F, K) and ``ub`` (b, K). ``fixed`` (b, F), where finite, adds
+    the equality ``A_bf lam_b = fixed_bf`` (a pressed finger's normal force). Returns
+    ``lam`` (b, K) or ``None`` when HiGHS does not report an optimum."""
     import scipy.sparse as sp
     from scipy.optimize import linprog
 
@@ -1190,9 +1191,18 @@ def _lp_block(G: FloatArray, A: FloatArray, ub: FloatArray) -> FloatArray | None
     nv = K + 1
     base = (np.arange(b) * nv)[:, None, None]
     cols = base + np.arange(K)[None, None, :]
-    eq = sp.coo_array((G.reshape(-1), ((np.arange(b)[:, None, None] * 3 + np.arange(3)[None, :, None])
-                                       .repeat(K, axis=2).reshape(-1), np.broadcast_to(cols, G.shape).reshape(-1))),
+    eq_rows = (np.arange(b)[:, None, None] * 3 + np.arange(3)[None, :, None]).repeat(K, axis=2)
+    eq = sp.coo_array((G.reshape(-1), (eq_rows.reshape(-1), np.broadcast_to(cols, G.shape).reshape(-1))),
                       shape=(3 * b, nv * b))
+    b_eq = np.tile(_EY, b)
+    if fixed is not None and np.isfinite(fixed).any():
+        fb, ff = np.nonzero(np.isfinite(fixed))
+        n_fix = fb.size
+        vals = A[fb, ff, :]  # (n_fix, K)
+        fix = sp.coo_array((vals.reshape(-1), (np.repeat(np.arange(n_fix), K), (fb[:, None] * nv + np.arange(K)[None, :])
+                                                 .reshape(-1))), shape=(n_fix, nv * b))
+        eq = sp.vstack([eq, fix])
+        b_eq = np.concatenate([b_eq, fixed[fb, ff]])
     rows_ub = (np.arange(b)[:, None] * F + np.arange(F)[None, :])  # (b, F)
     ub_vals = np.concatenate([A, -np.ones((b, F, 1))], axis=2)  # (b, F, K+1)
     ub_cols = np.broadcast_to((np.arange(b) * nv)[:, None, None] + np.arange(nv)[None, None, :], ub_vals.shape)
@@ -1204,7 +1214,7 @@ def _lp_block(G: FloatArray, A: FloatArray, ub: FloatArray) -> FloatArray | None
     bounds[:, :K, 1] = ub
     bounds[:, K, 1] = np.inf
     res = linprog(c.reshape(-1), A_ub=ineq.tocsr() if F else None, b_ub=np.zeros(F * b) if F else None,
-                  A_eq=eq.tocsr(), b_eq=np.tile(_EY, b), bounds=bounds.reshape(-1, 2), method="highs",
+                  A_eq=eq.tocsr(), b_eq=b_eq, bounds=bounds.reshape(-1, 2), method="highs",
                   options={"primal_feasibility_tolerance": 0.1 * FEASIBILITY_MARGIN,
                            "dual_feasibility_tolerance": 0.1 * FEASIBILITY_MARGIN})
     if res.status != 0 or res.x is None:
@@ -1221,6 +1231,7 @@ def bounded_support(
     max_force: float | None = None,
     margin: float = FEASIBILITY_MARGIN,
     fingers: int = 2,
+    pressed: ArrayLike | None = None,
 ) -> BoundedSupport:
     """Quasi-static support with every finger's normal force bounded, and its forces.
 
@@ -1238,6 +1249,11 @@ def bounded_support(
     ``t * weight <= max_force`` within :data:`FEASIBILITY_MARGIN` (normalised, like the
     equilibrium residual the LP solution is verified to). The LP's solution is also the
     force solution returned (a vertex: forces often lie on cone edges).
+
+    A *pressed* finger (``pressed``, an executor's press to a set force) has its normal
+    force fixed: ``sum_{k of finger f} (d_k . n_k) lam_k = pressed_f / weight``, its
+    tangential force free within its mode's cone (both edges for a sticking contact, the
+    one edge opposing the slip for a sliding one).
 
     Parameters
     ----------
@@ -1257,6 +1273,9 @@ def bounded_support(
         The cone test's margin (0 for closed cones, as the plan validator uses).
     fingers : int
         ``F``, the number of fingers in ``finger_forces``.
+    pressed : array_like, shape (F,) or (B, F), optional
+        Per finger, the normal force (N) a press holds it at, ``nan`` for a finger that
+        is not pressed (its force is the LP's, bounded by ``max_force``).
 
     Returns
     -------
@@ -1286,6 +1305,13 @@ def bounded_support(
     fo = np.broadcast_to(np.asarray(finger_of, dtype=np.int64), (B, C))
     if fo.size and (fo.min() < -1 or fo.max() >= fingers):
         raise GeometryError(f"finger_of must lie in -1 .. {fingers - 1}")
+    fixed = None
+    if pressed is not None:
+        fixed = np.array(np.broadcast_to(np.asarray(pressed, dtype=float), (B, fingers))) / weight
+        if (fixed[np.isfinite(fixed)] < 0).any():
+            raise GeometryError("pressed forces must be non-negative")
+        if not np.isfinite(fixed).any():
+            fixed = None
     cone = _feasible_impl(contacts, c, il, np.array([margin], dtype=float)) if C else np.zeros(B, bool)
     lam = np.full((B, 2 * C), np.nan)
     todo = np.flatnonzero(cone)
@@ -1300,17 +1326,22 @@ def bounded_support(
         ub = np.where(np.abs(gens).sum(axis=2) > 0, np.inf, 0.0)
         for s in range(0, todo.size, _LP_CHUNK):
             sl = slice(s, min(s + _LP_CHUNK, todo.size))
-            x = _lp_block(G[sl], A[sl], ub[sl])
+            fx = None if fixed is None else fixed[todo[sl]]
+            x = _lp_block(G[sl], A[sl], ub[sl], fx)
             if x is None:  # one troublesome instance must not spoil the chunk
                 logger.debug("bounded_support: chunk LP not optimal, solving its %d instances one by one",
                              sl.stop - sl.start)
                 x = np.full((sl.stop - sl.start, G.shape[2]), np.nan)
                 for j in range(sl.stop - sl.start):
-                    one = _lp_block(G[sl][j:j + 1], A[sl][j:j + 1], ub[sl][j:j + 1])
+                    one = _lp_block(G[sl][j:j + 1], A[sl][j:j + 1], ub[sl][j:j + 1],
+                                    None if fx is None else fx[j:j + 1])
                     if one is not None:
                         x[j] = one[0]
             x = np.maximum(x, 0.0)
             residual = np.abs(np.einsum("bik,bk->bi", G[sl], x) - _EY).max(axis=1)
+            if fx is not None:
+                held = np.einsum("bfk,bk->bf", A[sl], x)
+                residual = np.maximum(residual, np.where(np.isfinite(fx), np.abs(held - fx), 0.0).max(axis=1))
             x[~(residual <= FEASIBILITY_MARGIN)] = np.nan
             lam[todo[sl]] = x
     equilibrium = np.isfinite(lam).all(axis=1) & cone
