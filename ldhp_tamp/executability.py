@@ -42,7 +42,7 @@ from ldhp_tamp.plan import Plan
 from ldhp_tamp.scenario import Scenario
 from geometry.world import World
 from ldhp_tamp.validate import (PlanArrays, PlanContacts, PresentGroup, finger_offsets, plan_contacts,
-                                present_groups, rotate_vectors)
+                                present_groups, press_table, pressed_support, rotate_vectors)
 
 __all__ = ["ForwardReport", "forward_check", "SQUEEZE_COS"]
 
@@ -173,6 +173,21 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
                                                   * np.linalg.norm(n2, axis=1))
     if world.gripper.fixed_width:  # rigid fingers squeeze nothing: the motion decides alone
         squeeze[:] = False
+    # a step's press holds its finger's normal force (the executor's guarded move):
+    # the planned motion must balance with exactly that force, and the enumeration takes
+    # the finger's force as given instead of its normal velocity
+    press = press_table(plan)
+    pressed_rows = np.isfinite(press[rows]).any(axis=1)
+    if pressed_rows.any():
+        balanced = pressed_support(world, flat, press)[rows]
+        bad = pressed_rows & moving & ~balanced
+        if bad.any():
+            i = int(np.argmax(bad))
+            f = press[i][np.isfinite(press[i])]
+            return ForwardReport(bad, 0, int(flat.step[i]), int(flat.local[i]),
+                                 f"waypoint {int(flat.local[i])}: with the step's press ({float(f[0]):.3g} N) "
+                                 "the planned motion does not balance")
+    col_press = np.where(finger[None, :] & c.on, press[rows][:, np.clip(c.finger, 0, 1)], np.nan) / world.object.weight
     count = c.on.sum(axis=1)
     todo = moving & ~squeeze & (count > 0)
     skipped = int((todo & (count > MAX_CONTACTS)).sum())
@@ -183,8 +198,10 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
     checked = 0
     for grp in present_groups(c.on, todo):
         sel, cols, take = grp.rows, grp.cols, grp.take
+        pr = take(col_press)
         res = alternative_motions(take(c.points), take(c.normals), take(c.mu), np.ones(cols.shape, bool),
-                                  take(other), com0[sel], L, planned[sel])
+                                  take(other), com0[sel], L, planned[sel],
+                                  pressed=pr if np.isfinite(pr).any() else None, press_group=c.finger[cols])
         checked += sel.size
         ambiguous[sel] = res.ambiguous
         if res.ambiguous.any():
@@ -194,6 +211,7 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
                 labels = tuple(c.labels[k] for k in cols[j])
                 first = (i, _describe(labels, res.modes[j], res.twist[j]))
     stays = _object_may_stay(world, flat, c, com0, squeeze)
+    stays[rows[pressed_rows]] = False  # a pressed finger's friction: the enumeration decides
     for i in np.flatnonzero(stays):
         ambiguous[i] = True
         if first is None or i < first[0]:

@@ -44,6 +44,8 @@ __all__ = [
     "PlanStats",
     "PlanStatus",
     "Point",
+    "PRESS_KEY",
+    "Press",
     "Step",
     "TIME_KEYS",
     "Waypoint",
@@ -129,12 +131,42 @@ class Waypoint:
             object.__setattr__(self, "finger_forces", forces)
 
 
+#: The step parameter that asks the executor for a press (:class:`Press`).
+PRESS_KEY = "press"
+
+
+@dataclass(frozen=True)
+class Press:
+    """An executor's press before a move-object step (``parameters.press`` of the step:
+    ``{"finger": 0 or 1, "force_n": f}``): the executor moves the hand along that finger's
+    contact normal, into the object, until the finger's normal force reaches ``force_n``
+    newtons (a force-triggered guarded move, "press down"), replays the step's motion
+    with that offset, and takes the offset back at the step's end. The step's motion is
+    planned with that finger's normal force held at ``force_n`` (its compliance keeps it
+    there while the object follows the plan). The parameter is this planner's, within
+    the spec's free-form ``parameters``: an executor that does not know it replays the
+    step without the press."""
+
+    finger: int
+    force_n: float
+
+    def __post_init__(self) -> None:
+        if self.finger not in (0, 1):
+            raise ValueError(f"press: finger must be 0 or 1, got {self.finger!r}")
+        if not (math.isfinite(self.force_n) and self.force_n > 0):
+            raise ValueError(f"press: force_n must be a positive number of newtons, got {self.force_n!r}")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"finger": self.finger, "force_n": round(float(self.force_n), DECIMALS)}
+
+
 @dataclass(frozen=True)
 class Step:
     """One primitive instance: its name in the PDDL domain, family and waypoints.
 
     ``parameters`` is free-form JSON (kept read-only); ``contact_state`` is the pair
-    ``(from, to)`` of contact-state names.
+    ``(from, to)`` of contact-state names. A move-object step's ``parameters.press``
+    (:data:`PRESS_KEY`) is read as a :class:`Press` (:attr:`press`).
     """
 
     primitive: str
@@ -150,6 +182,23 @@ class Step:
         object.__setattr__(self, "waypoints", tuple(self.waypoints))
         if len(self.contact_state) != 2:
             raise ValueError("contact_state is a (from, to) pair")
+        self.press  # noqa: B018 -- a malformed press is refused when the step is made
+
+    @property
+    def press(self) -> Press | None:
+        """The press this move-object step asks for (``parameters.press``), or ``None``."""
+        raw = self.parameters.get(PRESS_KEY)
+        if raw is None:
+            return None
+        if self.family is not Family.MOVE_OBJECT:
+            raise ValueError("press: only a move-object step may ask for a press")
+        if not isinstance(raw, Mapping) or set(raw) != {"finger", "force_n"}:
+            raise ValueError('press: expected {"finger": 0 or 1, "force_n": newtons}')
+        finger, force = raw["finger"], raw["force_n"]
+        if isinstance(finger, bool) or not isinstance(finger, int) or isinstance(force, bool) \
+                or not isinstance(force, (int, float)):
+            raise ValueError('press: expected {"finger": 0 or 1, "force_n": newtons}')
+        return Press(finger, float(force))
 
 
 class FailureTier(str, enum.Enum):
@@ -374,8 +423,13 @@ class _Reader:
         wps = self.key(d, "waypoints", where)
         if not isinstance(wps, list):
             self.fail(f"{where}.waypoints", f"expected a list, got {_kind(wps)}")
-        return Step(primitive, Family(family), parameters, (cs_from, cs_to),
-                    tuple(self.waypoint(w, f"{where}.waypoints[{i}]") for i, w in enumerate(wps)))
+        try:
+            return Step(primitive, Family(family), parameters, (cs_from, cs_to),
+                        tuple(self.waypoint(w, f"{where}.waypoints[{i}]") for i, w in enumerate(wps)))
+        except ValueError as exc:
+            if str(exc).startswith("press:"):
+                self.fail(f"{where}.parameters.{PRESS_KEY}", str(exc)[len("press: "):])
+            raise
 
     def stats(self, value: Any) -> PlanStats:
         d = self.obj(value, "stats")

@@ -68,8 +68,8 @@ from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStatus
 from ldhp_tamp.scenario import Scenario, find_domain
 
 __all__ = ["RULES", "SLIP_TOL", "SUPPORT_ROUNDS", "PlanArrays", "PlanContacts", "SupportAnalysis", "ValidationReport",
-           "Violation", "domain_actions", "finger_offsets", "format_violation", "plan_contacts", "present_groups", "rotate_vectors",
-           "support_analysis", "validate_plan"]
+           "Violation", "domain_actions", "finger_offsets", "format_violation", "plan_contacts", "present_groups", "press_table",
+           "pressed_support", "rotate_vectors", "support_analysis", "validate_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -579,6 +579,45 @@ def _support(world: World, flat: PlanArrays, max_force: float | None = None) -> 
     return _Support(ok7, ok8, ok9, force, lps)
 
 
+def press_table(plan: Plan) -> FloatArray:
+    """(W, 2) per waypoint of :meth:`PlanArrays.of` and finger, the normal force (N) a
+    step's press (:attr:`ldhp_tamp.plan.Step.press`) holds that finger at, ``nan``
+    where the step asks for none. Presses are this planner's executor convention, not
+    a rule of the spec: the validator's rules do not read them."""
+    rows = []
+    for step in plan.steps:
+        row = [np.nan, np.nan]
+        pr = step.press
+        if pr is not None:
+            row[pr.finger] = pr.force_n
+        rows.extend([row] * len(step.waypoints))
+    return np.array(rows, dtype=float).reshape(-1, 2)
+
+
+def pressed_support(world: World, flat: PlanArrays, press: FloatArray) -> BoolArray:
+    """(W,) whether, at each waypoint whose finger a press holds (``press``, from
+    :func:`press_table`), rule 8's contacts and modes balance the weight with that
+    finger's normal force exactly the press's (:func:`geometry.mechanics.bounded_support`
+    with ``pressed``; the other finger's force bounded by ``max_force``); True at the
+    other waypoints."""
+    ok = np.ones(len(flat), dtype=bool)
+    rows = np.isfinite(press).any(axis=1) & flat.declared.any(axis=1)
+    if not rows.any():
+        return ok
+    max_force = getattr(world.gripper, "max_force", None)
+    for b in _support_batches(world, flat):
+        g = b.rows
+        sel = rows[g]
+        if not sel.any():
+            continue
+        r = mechanics.bounded_support(b.moving.select(sel), b.com[sel], world.object.length_scale,
+                                      world.object.weight, b.fingers[sel], max_force, margin=0.0,
+                                      pressed=press[g[sel]])
+        ok[g[sel]] = r.feasible
+    ok[np.isfinite(press).any(axis=1) & ~flat.declared.any(axis=1)] = False  # a press needs a contact
+    return ok
+
+
 #: Bisection rounds of :func:`support_analysis`: the friction fractions it reports are
 #: the feasible ends of brackets of width 2**-24 (about 6e-8).
 SUPPORT_ROUNDS = 24
@@ -603,7 +642,8 @@ class SupportAnalysis:
         Per finger ``[normal, tangential]`` (N) on the object in the plan spec's
         convention (tangential along the object edge's counter-clockwise direction): the
         force solution of :func:`geometry.mechanics.bounded_support` with rule 8's modes,
-        the equilibrium whose largest finger normal force is least. ``nan`` for a finger
+        the equilibrium whose largest finger normal force is least (a finger a step's
+        press holds has that force: :func:`press_table`). ``nan`` for a finger
         without contact, and for both where no finger touches or no equilibrium exists.
     max_finger_force : ndarray, shape (W,)
         The largest finger normal force (N) of that equilibrium; ``nan`` where no LP ran
@@ -695,13 +735,16 @@ def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUND
     largest = np.full(n_wp, np.nan)
     max_force = getattr(world.gripper, "max_force", None)
     scale = world.object.length_scale
+    press = press_table(plan)
     for b in _support_batches(world, flat):
         g = b.rows
         need[g] = _friction_needed(b.moving, b.com, scale, rounds)
         lp = np.isfinite(need[g]) & (b.fingers >= 0).any(axis=1)
         if lp.any():
+            pr = press[g[lp]]
             r = mechanics.bounded_support(b.moving.select(lp), b.com[lp], scale, world.object.weight,
-                                          b.fingers[lp], max_force, margin=0.0)
+                                          b.fingers[lp], max_force, margin=0.0,
+                                          pressed=pr if np.isfinite(pr).any() else None)
             forces[g[lp]] = r.finger_forces
             largest[g[lp]] = r.max_finger_force
     forces[~flat.declared] = np.nan  # a finger without contact has no force
