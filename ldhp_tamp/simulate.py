@@ -93,6 +93,15 @@ class SimOptions:
     preload_mm : float
         A finger that declares a contact is commanded this far inside the object (along
         the gripper's x axis), so a pinch squeezes; its force is capped by ``max_force``.
+    press_speed_mm_s, press_limit_mm, press_settle_s : float
+        A step's press (``parameters.press``, :class:`ldhp_tamp.plan.Press`): before the
+        step's motion the hand moves along the pressed finger's contact normal (fixed in
+        the gripper frame) at ``press_speed_mm_s`` until that finger's normal force on the
+        object reaches the press's force, or ``press_limit_mm`` of travel (then the step
+        goes on with what it has: the replay judges), and holds ``press_settle_s``; the
+        step is replayed with that offset, which is taken back at the same speed after
+        the step's last waypoint. A guarded move, as the paper's executor's "press down";
+        the force is not controlled during the motion.
     position_tol_mm, angle_tol_deg : float
         Largest error of the object pose at a waypoint.
     goal_position_tol_mm, goal_angle_tol_deg : float
@@ -111,6 +120,9 @@ class SimOptions:
     settle_s: float = 1.0
     preload_mm: float = 2.5
     preload_single_contacts: bool = False
+    press_speed_mm_s: float = 2.0
+    press_limit_mm: float = 10.0
+    press_settle_s: float = 0.1
     position_tol_mm: float = 15.0
     angle_tol_deg: float = 15.0
     goal_position_tol_mm: float = 10.0
@@ -124,7 +136,11 @@ class SimOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
-        for name in ("start_hold_s", "settle_s", "preload_mm", "stop_after_s"):
+        for name in ("press_speed_mm_s", "press_limit_mm"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        for name in ("start_hold_s", "settle_s", "preload_mm", "stop_after_s", "press_settle_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a non-negative number, got {value!r}")
@@ -175,6 +191,9 @@ class SimulationReport:
     max_force_n : float or None
         The finger drives' force cap; ``None`` for a fixed width (rigid fingers, no cap);
         ``max_force_default`` when it is not the scenario's.
+    presses : tuple
+        One ``(step, asked N, reached N, offset mm)`` per press made (a step's
+        ``parameters.press``).
     """
 
     status: SimStatus
@@ -191,6 +210,7 @@ class SimulationReport:
     wall_s: float
     max_force_n: float | None = None
     max_force_default: bool = False
+    presses: tuple[tuple[int, float, float, float], ...] = ()
 
     @property
     def max_position_error_mm(self) -> float:
@@ -310,6 +330,44 @@ class _Runner:
         self.dt = float(sim.model.opt.timestep)
         lo, _hi = world.gripper.width_range
         self.fixed_fingers = (-lo / 2.0, lo / 2.0)
+        names = [mujoco.mj_id2name(sim.model, mujoco.mjtObj.mjOBJ_GEOM, i) or "" for i in range(sim.model.ngeom)]
+        self.object_geoms = frozenset(i for i, nm in enumerate(names) if nm.startswith("object_"))
+        self.finger_geoms = tuple(frozenset(i for i, nm in enumerate(names) if nm.startswith(f"finger{f}_"))
+                                  for f in (1, 2))
+        self._wrench = np.zeros(6)
+
+    def finger_force(self, finger: int) -> float:
+        """The normal force (N) finger ``finger`` (0 or 1, the plan's) exerts on the object."""
+        d, m = self.data, self.model
+        mine, obj = self.finger_geoms[finger], self.object_geoms
+        total = 0.0
+        for i in range(d.ncon):
+            con = d.contact[i]
+            g1, g2 = int(con.geom1), int(con.geom2)
+            if (g1 in mine and g2 in obj) or (g2 in mine and g1 in obj):
+                self.mj.mj_contactForce(m, d, i, self._wrench)
+                total += abs(float(self._wrench[0]))
+        return total
+
+    def press(self, hand: FloatArray, fingers: FloatArray, direction: FloatArray, finger: int, force: float
+              ) -> tuple[float, float]:
+        """The guarded move of a press: the hand target moves from ``hand`` along
+        ``direction`` (unit, gripper frame) until ``finger``'s normal force reaches
+        ``force``; returns the offset (mm) and the force reached (N)."""
+        o = self.options
+        step_mm = o.press_speed_mm_s * self.dt
+        world_dir = _rotate(direction, float(hand[2]))
+        delta = 0.0
+        reached = self.finger_force(finger)
+        while reached < force and delta < o.press_limit_mm:
+            delta += step_mm
+            target = np.array(hand, dtype=float)
+            target[:2] += world_dir * delta * MM
+            self.command(target, fingers)
+            self.mj.mj_step(self.model, self.data)
+            reached = self.finger_force(finger)
+        self.hold(o.press_settle_s)
+        return delta, self.finger_force(finger)
 
     def place(self, obj: Pose, hand: Sequence[float], fingers: Sequence[float] | None) -> None:
         d = self.data
@@ -377,6 +435,29 @@ class _Runner:
         return bool(np.all(np.isfinite(self.data.qpos)))
 
 
+def _rotate(v: FloatArray, theta: float) -> FloatArray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def _press_direction(world: World, step: Any, finger: int) -> FloatArray | None:
+    """The pressed finger's contact normal into the object at the step's first waypoint,
+    in the gripper frame: the inward normal of the object edge nearest the declared
+    contact point; ``None`` when that finger declares no contact there."""
+    w = step.waypoints[0]
+    point = w.finger_contacts[finger]
+    if point is None:
+        return None
+    verts = w.object.apply(world.object.polygon.vertices)
+    a, b = verts, np.roll(verts, -1, axis=0)
+    ab = b - a
+    t = np.clip(((np.asarray(point) - a) * ab).sum(axis=1) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0.0, 1.0)
+    dist = np.linalg.norm(a + t[:, None] * ab - np.asarray(point), axis=1)
+    e = int(np.argmin(dist))
+    inward = np.array([-ab[e, 1], ab[e, 0]]) / max(float(np.linalg.norm(ab[e])), 1e-12)  # left of a CCW edge
+    return _rotate(inward, -w.gripper.theta)
+
+
 def _errors(planned: Pose, simulated: tuple[float, float, float]) -> tuple[float, float]:
     pos = math.hypot(simulated[0] - planned.x, simulated[1] - planned.y)
     ang = abs(math.degrees(float(wrap_angle(math.radians(simulated[2]) - planned.theta))))
@@ -425,6 +506,7 @@ def simulate_plan(plan: Plan, scenario: Scenario, options: SimOptions = SimOptio
     run.hold_object(options.start_hold_s)
 
     records: list[WaypointRecord] = []
+    presses: list[tuple[int, float, float, float]] = []  # step, asked (N), reached (N), offset (mm)
     diverged: WaypointRecord | None = None
     why = ""
     stop_at = math.inf
@@ -466,6 +548,15 @@ def simulate_plan(plan: Plan, scenario: Scenario, options: SimOptions = SimOptio
         costs = cmd.cost[first:last + 1]
         duration, travel = _profile(float(costs[-1]), options.speed_mm_s, options.ramp_s)
         check(record(first))
+        step = plan.steps[int(cmd.step[first])]
+        pr = step.press if last > first else None
+        press_dir = None if pr is None else _press_direction(world, step, pr.finger)
+        offset = 0.0
+        if pr is not None and press_dir is not None and diverged is None:
+            offset, reached = run.press(cmd.hand[first], cmd.fingers[first], press_dir, pr.finger, pr.force_n)
+            presses.append((int(cmd.step[first]), pr.force_n, reached, offset))
+            log.debug("step %d: pressed finger %d to %.3g N (asked %.3g N) over %.3f mm", int(cmd.step[first]),
+                      pr.finger, reached, pr.force_n, offset)
         if duration > 0.0 and last > first:
             # the time at which each waypoint of the step is reached
             tt = np.arange(1, int(math.ceil(duration / dt)) + 1) * dt
@@ -474,6 +565,11 @@ def simulate_plan(plan: Plan, scenario: Scenario, options: SimOptions = SimOptio
             rows = np.arange(first, last + 1)
             hand = np.column_stack([np.interp(u, np.arange(len(rows)), cmd.hand[rows, j]) for j in range(3)])
             fingers = np.column_stack([np.interp(u, np.arange(len(rows)), cmd.fingers[rows, j]) for j in range(2)])
+            if offset > 0.0:
+                assert press_dir is not None
+                ca, sa = np.cos(hand[:, 2]), np.sin(hand[:, 2])
+                hand[:, 0] += (ca * press_dir[0] - sa * press_dir[1]) * offset * MM
+                hand[:, 1] += (sa * press_dir[0] + ca * press_dir[1]) * offset * MM
             reach = np.searchsorted(c, costs[1:] - 1e-9)  # first sample at which waypoint k is reached
             reach = np.minimum(reach, len(tt) - 1)
             start = 0
@@ -488,6 +584,14 @@ def simulate_plan(plan: Plan, scenario: Scenario, options: SimOptions = SimOptio
         elif last > first:
             for k in range(first + 1, last + 1):
                 check(record(k))
+        if offset > 0.0 and run.finite():  # the press taken back, at the press's speed
+            assert press_dir is not None
+            back = np.linspace(offset, 0.0, max(2, int(math.ceil(offset / (options.press_speed_mm_s * dt)))))
+            wd = _rotate(press_dir, float(cmd.hand[last, 2]))
+            hand = np.repeat(cmd.hand[last][None, :], back.size, axis=0)
+            hand[:, 0] += wd[0] * back * MM
+            hand[:, 1] += wd[1] * back * MM
+            run.run(hand, np.repeat(cmd.fingers[last][None, :], back.size, axis=0))
         run.command(cmd.hand[last], cmd.fingers[last])
         if not run.finite():
             break
@@ -513,7 +617,8 @@ def simulate_plan(plan: Plan, scenario: Scenario, options: SimOptions = SimOptio
     common = dict(records=tuple(records), final_pose=final_pose, final_position_error_mm=fpos,
                   final_angle_error_deg=fang, simulated_s=run.time, wall_s=wall,
                   max_force_n=sim.max_force if sim.variable_width else None,
-                  max_force_default=sim.variable_width and not sim.max_force_from_scenario)
+                  max_force_default=sim.variable_width and not sim.max_force_from_scenario,
+                  presses=tuple(presses))
     if diverged is None:
         assert fpos is not None and fang is not None
         reason = (f"every waypoint within {options.position_tol_mm:g} mm / {options.angle_tol_deg:g} deg "
@@ -564,6 +669,8 @@ def report_to_json(report: SimulationReport, plan: str = "", scenario: str = "",
         "wall_s": _r(report.wall_s, 3),
         "max_force_n": report.max_force_n,
         "max_force_default": report.max_force_default,
+        "presses": [{"step": st, "force_n": _r(asked), "reached_n": _r(got), "offset_mm": _r(off)}
+                    for st, asked, got, off in report.presses],
     }
     if options is not None:
         head["options"] = asdict(options)
