@@ -47,9 +47,11 @@ __all__ = [
     "MotionCheckOptions",
     "MotionGrasps",
     "NO_CONTACT",
+    "PRESS_LADDER",
     "enumerate_grasps",
     "pose_conditioned",
     "motion_conditioned",
+    "press_forces",
     "rate_motion_grasps",
     "within_force_limit",
 ]
@@ -1028,10 +1030,16 @@ class MotionGrasps:
         are in neither list).
     rejected_at : ndarray of int, shape (R,)
         For each of them, a sample (index into ``path``) at which it collides or has no
-        equilibrium: the parts of the path it was not checked on may still admit it.
+        equilibrium: the parts of the path it was not checked on may still admit it;
+        ``-1`` for a one-finger grasp that needs a press no force of the ladder serves
+        over the whole path (:func:`press_forces`): a part of the path may still admit it.
     rated : bool
         ``quality``, ``force_closure`` and ``alpha`` are computed (otherwise NaN / False
         placeholders: :func:`rate_motion_grasps` fills them).
+    press : ndarray, shape (A,), or None
+        Per admissible grasp, the normal force (N) an executor's press must hold its one
+        finger at for the motion to happen (:func:`press_forces`), ``nan`` for a grasp
+        that needs none; ``None``: no grasp needs one.
     """
 
     indices: IntArray
@@ -1043,9 +1051,25 @@ class MotionGrasps:
     rejected: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     rejected_at: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     rated: bool = True
+    press: FloatArray | None = None
 
     def __len__(self) -> int:
         return int(self.indices.shape[0])
+
+    def press_of(self, grasp: int) -> float | None:
+        """The press (N) grasp ``grasp`` executes the segment with, or ``None``."""
+        if self.press is None:
+            return None
+        at = np.flatnonzero(self.indices == grasp)
+        if not at.size or not np.isfinite(self.press[at[0]]):
+            return None
+        return float(self.press[at[0]])
+
+    def take(self, keep: BoolArray) -> "MotionGrasps":
+        """The same G_m with only the grasps marked in ``keep`` (aligned with ``indices``)."""
+        return replace(self, indices=_ro(self.indices[keep], np.int64), quality=_ro(self.quality[keep], float),
+                       force_closure=_ro(self.force_closure[keep], bool), alpha=_ro(self.alpha[keep], float),
+                       press=None if self.press is None else _ro(self.press[keep], float))
 
 
 @dataclass(frozen=True, eq=False)
@@ -1274,7 +1298,6 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         raise GeometryError(f"motion_conditioned: recheck samples must lie in [0, {n_s})")
     cand = np.setdiff1d(cand, known)
     free = np.unique(np.asarray(free_at, dtype=np.int64).reshape(-1))
-    idle = _leaves_it_still(world, grasps, p, cand)
 
     # (a) collision-free and (b) + (c) feasible at every sample: chunk by chunk of samples
     # spread over the path (ends and middle first), pruning the candidates that fail
@@ -1312,10 +1335,6 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         rejected_at.append(samples[np.argmax(hit[bad], axis=1)])
         return alive[~bad]
 
-    if idle.any():
-        rejected.append(cand[idle])
-        rejected_at.append(np.zeros(int(idle.sum()), dtype=np.int64))
-        cand = cand[~idle]
     alive = cand
     order = _spread_order(n_s)
     start, size = 0, opts.chunk
@@ -1332,6 +1351,24 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
                 break
         alive = check(alive, samples)
     alive = np.union1d(alive, check(known, again))
+    # One-finger grasps whose finger, moved by position control, would leave the object
+    # resting where it is make the motion only under a press (:func:`press_forces`);
+    # those no press of the ladder serves are rejected (for the path as a whole).
+    press = None
+    idle = _leaves_it_still(world, grasps, p, alive)
+    if idle.any():
+        assert env is not None
+        force = press_forces(world, grasps, p, alive[idle], env)
+        served = np.isfinite(force)
+        rejected.append(alive[idle][~served])
+        rejected_at.append(np.full(int((~served).sum()), -1, dtype=np.int64))  # the path as a whole
+        press = np.full(alive.size, np.nan)
+        press[np.flatnonzero(idle)[served]] = force[served]
+        keep = ~idle
+        keep[np.flatnonzero(idle)[served]] = True
+        alive, press = alive[keep], press[keep]
+        if not np.isfinite(press).any():
+            press = None
 
     if rate:
         closure, alpha, quality = _rating(world, grasps, p, alive, env, opts)
@@ -1343,7 +1380,8 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     rat = np.concatenate(rejected_at) if rejected_at else np.zeros(0, dtype=np.int64)
     by = np.argsort(rej, kind="stable")
     return MotionGrasps(_ro(alive, np.int64), _ro(quality, float), _ro(closure, bool), _ro(alpha, float),
-                        checks, truncated, _ro(rej[by], np.int64), _ro(rat[by], np.int64), rated=rate)
+                        checks, truncated, _ro(rej[by], np.int64), _ro(rat[by], np.int64), rated=rate,
+                        press=None if press is None else _ro(press, float))
 
 
 def within_force_limit(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLike, max_force: float,
@@ -1406,6 +1444,134 @@ def _leaves_it_still(world: World, grasps: GraspSet, p: FloatArray, cand: IntArr
         pushed[np.flatnonzero(live)[np.asarray(hit).reshape(int(live.sum()), -1).any(axis=1)]] = True
     out[one[~pushed]] = True
     return out
+
+
+#: The normal forces a press is tried with, in multiples of the object's weight, least
+#: first (capped by the gripper's ``max_force``). Not less than twice the weight: a
+#: fingertip corner dragging a block at one weight creeps in the physics simulation
+#: (task 2's last push: 16 mm behind after 75 mm at 1 W, 0.17 mm at 2 W; docs/design.md,
+#: "Presses"), though Coulomb friction holds it there with a tenth of its cone.
+PRESS_LADDER = (2.0, 4.0, 8.0)
+
+
+def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLike,
+                 env: _EnvContacts | None = None, ladder: tuple[float, ...] = PRESS_LADDER) -> FloatArray:
+    """(len(rows),) the least normal force (N) of ``ladder`` (times the object's weight,
+    at most the gripper's ``max_force``) with which a press of each one-finger grasp of
+    ``rows`` makes the motion along ``path``; ``nan`` where none does.
+
+    A press (the executor's guarded move, "press down": ``ldhp_tamp.plan.Press``) holds
+    the finger's normal force at ``f`` through the step. With ``f`` it makes the motion
+    when (1) at every sample the contacts and modes of :func:`motion_conditioned` (the
+    finger sticking) balance the weight with the finger's normal force exactly ``f``
+    (:func:`geometry.mechanics.bounded_support` with ``pressed``), and (2) the object
+    cannot stay where it is at the first sample: its environment contacts (full cones)
+    do not balance the weight and the finger sliding over it, its force ``f`` along the
+    normal and ``mu f`` against the finger's motion. Other object motions are the
+    forward problem's to exclude (the judge, ``ldhp_tamp.executability``)."""
+    p = np.asarray(path, dtype=float).reshape(-1, 3)
+    r = np.asarray(rows, dtype=np.int64).reshape(-1)
+    out = np.full(r.size, np.nan)
+    if not r.size or p.shape[0] < 2:
+        return out
+    weight = world.object.weight
+    limit = getattr(world.gripper, "max_force", None)
+    forces = [f * weight for f in ladder if limit is None or f * weight <= limit]
+    if not forces:
+        return out
+    env = env if env is not None else _env_contacts(world, p, CONTACT_TOL)
+    length = world.object.length_scale
+    touch = grasps.touching[r]
+    one = touch.sum(axis=1) == 1
+    finger = np.argmax(touch, axis=1)
+    c = env.points.shape[1]
+    finger_of = np.concatenate([np.full(c, -1), [0, 1]])
+    # (2) the object staying: the finger's velocity over the first motion, its slip against the object
+    _, start, com0 = _instances(world, grasps, r, p, env, np.array([0]))
+    q = np.nan_to_num(grasps.contact[r])  # object frame (A, 2, 2)
+    c1, s1 = np.cos(p[1, 2]), np.sin(p[1, 2])
+    at1 = np.stack([c1 * q[..., 0] - s1 * q[..., 1] + p[1, 0], s1 * q[..., 0] + c1 * q[..., 1] + p[1, 1]], axis=-1)
+    moved = at1 - start.points[:, c:, :]  # (A, 2, 2)
+    nrm = start.normals[:, c:, :]
+    tang = np.stack([-nrm[..., 1], nrm[..., 0]], axis=-1)
+    vt = (moved * tang).sum(axis=-1)  # finger's tangential motion (A, 2)
+    own = vt[np.arange(r.size), finger]
+    slips = one & (np.abs(own) > 1e-9)
+    modes = np.array(start.modes)
+    modes[:, :c] = np.where(modes[:, :c] == mechanics.ContactMode.ABSENT, mechanics.ContactMode.ABSENT,
+                            mechanics.ContactMode.STICKING)
+    modes[np.arange(r.size), c + finger] = mechanics.ContactMode.SLIDING
+    sdir = np.zeros(start.points.shape)
+    sdir[np.arange(r.size), c + finger] = -np.sign(own)[:, None] * tang[np.arange(r.size), finger]
+    stay = mechanics.Contacts.trusted(start.points, start.normals, start.mu, modes.astype(np.int8), sdir)
+    todo = np.flatnonzero(slips)
+    order = _spread_order(p.shape[0])
+    for f in forces:
+        if not todo.size:
+            break
+        held = np.full((todo.size, 2), np.nan)
+        held[np.arange(todo.size), finger[todo]] = f
+        stays = mechanics.bounded_support(stay.select(todo), com0[todo], length, weight, finger_of, None, margin=0.0,
+                                          pressed=held).feasible
+        alive = todo[~stays]
+        start_at, size = 0, 2
+        while alive.size and start_at < order.size:
+            samples = order[start_at:start_at + size]
+            start_at, size = start_at + size, size * 4
+            _, allc, com = _instances(world, grasps, r[alive], p, env, samples)
+            held = np.full((alive.size * samples.size, 2), np.nan)
+            held[np.arange(held.shape[0]), np.repeat(finger[alive], samples.size)] = f
+            ok = mechanics.bounded_support(allc, com, length, weight, finger_of, limit, margin=0.0,
+                                           pressed=held).feasible.reshape(alive.size, samples.size)
+            alive = alive[ok.all(axis=1)]
+        if alive.size:
+            alive = alive[~_press_alternatives(world, grasps, p, r[alive], finger[alive], env, f)]
+        out[alive] = f
+        todo = np.setdiff1d(todo, alive)
+    return out
+
+
+#: Samples (the first, then spread over the path) at which :func:`press_forces` solves
+#: the forward problem of a pressed grasp.
+PRESS_FORWARD_SAMPLES = 4
+
+
+def _press_alternatives(world: World, grasps: GraspSet, p: FloatArray, rows: IntArray, finger: IntArray,
+                        env: _EnvContacts, force: float) -> BoolArray:
+    """(len(rows),) whether the forward problem (:func:`geometry.forward.alternative_motions`)
+    lets the object take another motion than the planned one under the press of
+    ``force`` at some of :data:`PRESS_FORWARD_SAMPLES` samples (the first among them)."""
+    from geometry.forward import MAX_CONTACTS, alternative_motions, screw_velocity
+
+    moving = [j for j in _spread_order(p.shape[0] - 1) if j < p.shape[0] - 1]
+    samples = np.array(sorted(set([0] + moving[:PRESS_FORWARD_SAMPLES - 1])), dtype=np.int64)
+    a, k = rows.size, samples.size
+    _, allc, com = _instances(world, grasps, rows, p, env, samples)
+    c = env.points.shape[1]
+    present = allc.modes != mechanics.ContactMode.ABSENT  # (a*k, C)
+    p0 = np.repeat(p[samples][None], a, axis=0).reshape(-1, 3)
+    p1 = np.repeat(p[samples + 1][None], a, axis=0).reshape(-1, 3)
+    vel = np.zeros(allc.points.shape)
+    vel[:, c:, :] = screw_velocity(p0, p1, allc.points[:, c:, :])  # the fingers move with the plan
+    planned = np.column_stack([screw_velocity(p0, p1, com[:, None, :])[:, 0], wrap_angle(p1[:, 2] - p0[:, 2])])
+    pressed = np.full(present.shape, np.nan)
+    fk = np.repeat(finger, k)
+    pressed[np.arange(a * k), c + fk] = force / world.object.weight
+    bad = np.zeros(a * k, dtype=bool)
+    count = present.sum(axis=1)
+    ok = count <= MAX_CONTACTS  # more contacts: left to the judge (it logs them)
+    for n_on in np.unique(count[ok]):
+        sel = np.flatnonzero(ok & (count == n_on))
+        order = np.argsort(~present[sel], axis=1, kind="stable")[:, :n_on]
+
+        def take(x: np.ndarray, sel: IntArray = sel, order: IntArray = order) -> np.ndarray:
+            return np.take_along_axis(x[sel], order[..., None] if x.ndim == 3 else order, axis=1)
+
+        res = alternative_motions(take(allc.points), take(allc.normals), take(allc.mu), np.ones(order.shape, bool),
+                                  take(vel), com[sel], world.object.length_scale, planned[sel],
+                                  pressed=take(pressed))
+        bad[sel] = res.ambiguous
+    return bad.reshape(a, k).any(axis=1)
 
 
 def _rating(world: World, grasps: GraspSet, p: FloatArray, alive: IntArray, env: _EnvContacts | None,

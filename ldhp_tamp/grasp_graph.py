@@ -68,7 +68,7 @@ from geometry.world import GripperState, PolylineGripper, World
 from ldhp_tamp import budget
 from ldhp_tamp.parallel import Helper, cores, two_at_a_time
 from ldhp_tamp.path import Segment
-from ldhp_tamp.plan import Step, Waypoint
+from ldhp_tamp.plan import PRESS_KEY, Press, Step, Waypoint
 from ldhp_tamp.primitives.adjust_grasp import (
     AdjustContext,
     AdjustGraspOptions,
@@ -613,9 +613,7 @@ class GraspPlanner:
         rejected = np.concatenate([mg.rejected, mg.indices[out]])
         at = np.concatenate([mg.rejected_at, np.zeros(int(out.sum()), dtype=np.int64)])
         order = np.argsort(rejected, kind="stable")
-        self._motion_sets[key] = (replace(mg, indices=mg.indices[keep], quality=mg.quality[keep],
-                                          force_closure=mg.force_closure[keep], alpha=mg.alpha[keep],
-                                          rejected=rejected[order], rejected_at=at[order]), n_cand)
+        self._motion_sets[key] = (replace(mg.take(keep), rejected=rejected[order], rejected_at=at[order]), n_cand)
         return int(out.sum())
 
     def bound_forces(self, segment: Segment) -> int:
@@ -1031,7 +1029,12 @@ class GraspPlanner:
             fc = tuple((float(pts[m, 0]), float(pts[m, 1])) if touch[m] else None for m in range(2))
             wps.append(Waypoint(obj, Pose(float(grip[j, 0]), float(grip[j, 1]), float(grip[j, 2])),
                                 float(gs.width[g]), fc))  # type: ignore[arg-type]
-        return Step(seg.primitive, Family.MOVE_OBJECT, dict(seg.parameters),
+        params = dict(seg.parameters)
+        hit = self._motion_sets.get(_motion_key(seg))
+        force = None if hit is None else hit[0].press_of(g)
+        if force is not None:  # the executor presses the one finger first (G_m found it needs it)
+            params[PRESS_KEY] = Press(int(np.argmax(touch)), force).as_dict()
+        return Step(seg.primitive, Family.MOVE_OBJECT, params,
                     (seg.from_state.name, seg.to_state.name), tuple(wps))
 
     def _failure_reason(self, segments: Sequence[Segment], layers: list[_Layer], inter: list[FloatArray],

@@ -67,3 +67,20 @@ def test_too_many_contacts_is_an_error() -> None:
     with pytest.raises(GeometryError):
         alternative_motions(np.zeros((1, c, 2)), np.tile([0.0, 1.0], (1, c, 1)), np.zeros((1, c)), np.ones((1, c), bool),
                             np.zeros((1, c, 2)), COM, 1.0, np.zeros((1, 3)))
+
+
+def test_a_pressed_finger_drags_a_lying_block_above_the_friction_ratio() -> None:
+    """A block lying on a floor (mu_e 0.03), a finger on its top moving right (mu_g 0.6).
+    Moved by position alone the finger may slide over it and leave it; pressed with a
+    normal force f (weights), the block cannot stay once mu_g f > mu_e (1 + f), f > 0.0526,
+    and the drag is the only motion; below that ratio the block staying balances too."""
+    pts = [[[0.0, 0.0], [100.0, 0.0], [50.0, 20.0]]]
+    nrm = [[[0.0, 1.0], [0.0, 1.0], [0.0, -1.0]]]
+    mu = [[0.03, 0.03, 0.6]]
+    w = [[[0.0, 0.0], [0.0, 0.0], [1.0, 0.0]]]
+    args = (pts, nrm, mu, [[True] * 3], w, [[50.0, 10.0]], 50.0, [[1.0, 0.0, 0.0]])
+    assert alternative_motions(*args).ambiguous[0]
+    threshold = 0.03 / (0.6 - 0.03)
+    assert alternative_motions(*args, pressed=[[np.nan, np.nan, 0.9 * threshold]]).ambiguous[0]
+    assert not alternative_motions(*args, pressed=[[np.nan, np.nan, 1.1 * threshold]]).ambiguous[0]
+    assert not alternative_motions(*args, pressed=[[np.nan, np.nan, 2.0]]).ambiguous[0]

@@ -733,12 +733,16 @@ def test_a_corner_leaving_the_lip_for_the_wall_separates_there() -> None:
     assert corner.any() and (env.modes[0][corner] != mechanics.ContactMode.STICKING).all()
 
 
-def test_a_finger_that_would_rise_off_a_resting_block_cannot_start_its_tip() -> None:
+def test_a_finger_that_would_rise_off_a_resting_block_starts_its_tip_only_pressed() -> None:
     """The standing block rests on the table alone. Tipped clockwise about its
     bottom-right corner, a finger on its left side presses into it (the motion is forced),
     while a finger on its top face left of the corner rises with the planned motion and
-    would leave the block where it is: such a grasp cannot start the tip, however well
-    forces balance along it, and G_m refuses it at the first sample."""
+    would leave the block where it is: such a grasp cannot start the tip by position
+    control alone, however well forces balance along it. Pressed down first (the
+    executor's guarded move), its friction drags the top: near the corner that tips the
+    block (mu_e = 0.3: the drag needs (35 W + f (70 - x)) / 150 < mu_e (W + f)), far from
+    it the block slides. G_m admits the first with their press and refuses the others (for
+    the path as a whole: a part of it may admit them)."""
     world, gs = lift_world()
     path = tip_right(3.0)
     cand = candidates(world, gs, path)
@@ -753,10 +757,17 @@ def test_a_finger_that_would_rise_off_a_resting_block_cannot_start_its_tip() -> 
     assert idle[:top.size].mean() > 0.9  # (a free finger swinging into the block presses too)
     assert not idle[top.size:].any()
     res = motion_conditioned(world, gs, path, np.concatenate([top, left]), rate=False)
-    refused = top[idle[:top.size]]
-    assert not np.isin(refused, res.indices).any()
-    assert (res.rejected_at[np.isin(res.rejected, refused)] == 0).all()
+    still = top[idle[:top.size]]
+    pressed = np.array([res.press_of(int(g)) is not None for g in still])
+    admitted = np.isin(still, res.indices)
+    assert (pressed == admitted).all()  # none of them without a press
+    assert admitted.any() and not admitted.all()
+    xs = gs.contact[still, np.where(gs.touching[still, 0], 0, 1), 0]
+    assert xs[admitted].min() > xs[~admitted].min()  # the far ones slide instead
+    assert np.isin(still[~admitted], res.rejected).all()
+    assert (res.rejected_at[np.isin(res.rejected, still[~admitted])] == -1).any()  # no press serves the path
     assert np.isin(left, res.indices).any()
+    assert all(res.press_of(int(g)) is None for g in left)
     lifted = straight([0, 10, 0], [0, 30, 0])  # in the air the test does not apply: nothing rests
     assert grasps_module._leaves_it_still(world, gs, lifted, one).sum() == 0
 

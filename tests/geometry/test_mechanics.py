@@ -717,3 +717,25 @@ def test_bounded_support_input_checks():
         mech.bounded_support(_pinch(0.5), [0.0, 0.0], 40.0, -1.0, [0, 1])
     with pytest.raises(GeometryError):
         mech.bounded_support(_pinch(0.5), [0.0, 0.0], 40.0, 9.81, [0, 1], max_force=0.0)
+
+
+def test_bounded_support_holds_a_pressed_finger_at_its_force() -> None:
+    """A block on a floor (mu 0.03) dragged by a finger pressing on its top: with the
+    press fixed at f the floor carries W + f and the finger's friction balances the floor's
+    sliding friction 0.03 (W + f), within mu_g f only for f >= 0.03 W / 0.57."""
+    from geometry.mechanics import ContactMode, bounded_support
+
+    W = 4.905
+    drag = Contacts.make([[0.0, 0.0], [100.0, 0.0], [50.0, 20.0]], [[0.0, 1.0], [0.0, 1.0], [0.0, -1.0]],
+                         [0.03, 0.03, 0.6], [ContactMode.SLIDING, ContactMode.SLIDING, ContactMode.STICKING],
+                         [[1.0, 0.0], [1.0, 0.0], [0.0, 0.0]])
+    r = bounded_support(drag, [50.0, 10.0], 50.0, W, [-1, -1, 0], None, margin=0.0, pressed=[W, np.nan])
+    assert r.feasible[0]
+    assert r.finger_forces[0, 0, 0] == pytest.approx(W)
+    assert r.finger_forces[0, 0, 1] == pytest.approx(-0.03 * 2 * W)
+    low = 0.9 * 0.03 * W / 0.57
+    assert not bounded_support(drag, [50.0, 10.0], 50.0, W, [-1, -1, 0], None, margin=0.0,
+                               pressed=[low, np.nan]).feasible[0]
+    # unpressed, the least finger force is the threshold itself
+    free = bounded_support(drag, [50.0, 10.0], 50.0, W, [-1, -1, 0], None, margin=0.0)
+    assert free.max_finger_force[0] == pytest.approx(0.03 * W / 0.57, rel=1e-6)
