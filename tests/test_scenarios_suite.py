@@ -190,3 +190,21 @@ def test_cmgmp_peg_ends_in_the_hole() -> None:
     goal = s.world.object_vertices(s.goal)
     assert goal[:, 1].min() == pytest.approx(-50) and -25 < goal[:, 0].min() < goal[:, 0].max() < 25
     assert s.start_grasp is not None and s.start_grasp.width == 55
+
+
+# --------------------------------------------------------------------------- issue 14
+
+
+def test_tight_peg_has_3_5_mm_of_clearance_and_ends_on_the_hole_floor() -> None:
+    s = _load("peg_in_hole_tight")
+    env = s.world.environment
+    np.testing.assert_allclose(env.edges[0], [[35, -140], [-35, -140]])  # e1: the hole floor
+    start, goal = s.world.object_vertices(s.start), s.world.object_vertices(s.goal)
+    assert np.ptp(goal[:, 0]) == pytest.approx(63)  # a 70 mm hole: 3.5 mm on each side
+    assert goal[:, 0].min() - (-35) == pytest.approx(3.5) and 35 - goal[:, 0].max() == pytest.approx(3.5)
+    assert goal[:, 1].min() == pytest.approx(-140) and goal[:, 1].max() > 0  # its top stands out
+    assert start[:, 1].min() > 0 and s.start_grasp is not None and s.goal_release
+    # the gripper and the friction of task 2's second configuration, with its force limit
+    t = _load("task2_slot_insertion")
+    assert _same_gripper(s, t) and s.world.gripper.max_force == 125
+    assert (s.world.friction.environment, s.world.friction.gripper) == (0.3, 0.6)

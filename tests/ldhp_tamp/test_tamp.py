@@ -161,6 +161,14 @@ def test_a_peg_is_lifted_and_lowered_into_a_hole() -> None:
     assert validate_plan(result.plan, sc).valid
 
 
+def test_a_peg_is_lowered_into_a_hole_with_3_5_mm_of_clearance_and_let_go() -> None:
+    sc = load_scenario(scenarios_dir() / "peg_in_hole_tight.toml")
+    result = solve(sc)
+    assert result.status is SolveStatus.SOLVED, result.reason
+    assert [s.primitive for s in result.plan.steps] == ["air-move", "open"]
+    assert validate_plan(result.plan, sc).valid
+
+
 def test_verbose_shows_the_planners_progress_and_vv_the_engines_too(tmp_path: Path) -> None:
     import subprocess
     import sys
