@@ -208,3 +208,50 @@ def test_tight_peg_has_3_5_mm_of_clearance_and_ends_on_the_hole_floor() -> None:
     t = _load("task2_slot_insertion")
     assert _same_gripper(s, t) and s.world.gripper.max_force == 125
     assert (s.world.friction.environment, s.world.friction.gripper) == (0.3, 0.6)
+
+
+def _peg_held_off_the_floor(length: float, steepest: float, walls: tuple[str, ...]) -> bool:
+    """Whether forces hold the tight peg (0.3 kg, 63 mm wide) still off the hole's floor:
+    the walls (mu_e) at the corners in ``walls`` (``bl``: bottom left, ``tr``: top right,
+    ...), and any number of fingers (mu_g, at most max_force each) anywhere on its top edge
+    (pushing straight down) or on a top corner pushing towards the far wall with a contact
+    normal at least ``steepest`` degrees below horizontal. A linear feasibility problem in
+    the contact forces' friction-cone coefficients."""
+    from scipy.optimize import linprog
+
+    s = _load("peg_in_hole_tight")
+    mu_e, mu_g, fmax = s.world.friction.environment, s.world.friction.gripper, s.world.gripper.max_force
+    half, com = 31.5, np.array([0.0, length / 2])
+    cols: list[tuple[float, float, float]] = []
+    bounds: list[tuple[float, float | None]] = []
+
+    def contact(point: tuple[float, float], normal: np.ndarray, mu: float, most: float | None) -> None:
+        r = np.asarray(point) - com
+        for side in (1.0, -1.0):
+            f = normal + side * mu * np.array([-normal[1], normal[0]])
+            cols.append((f[0], f[1], r[0] * f[1] - r[1] * f[0]))
+            bounds.append((0.0, most))
+
+    corners = {"bl": (-half, 0.0), "br": (half, 0.0), "tl": (-half, length), "tr": (half, length)}
+    for name in walls:
+        x, y = corners[name]
+        contact((x, y), np.array([1.0 if x < 0 else -1.0, 0.0]), mu_e, None)
+    for x in (-half, half):
+        contact((x, length), np.array([0.0, -1.0]), mu_g, fmax)
+        for beta in np.radians(np.linspace(steepest, 90.0, 10)):
+            contact((x, length), np.array([np.cos(beta) * (1.0 if x < 0 else -1.0), -np.sin(beta)]), mu_g, fmax)
+    weight = s.world.object.mass * 9.81
+    res = linprog(np.zeros(len(cols)), A_eq=np.array(cols).T, b_eq=[0.0, weight, 0.0], bounds=bounds, method="highs")
+    return res.status == 0
+
+
+@pytest.mark.parametrize("length", [40.0, 130.0])
+def test_a_tight_peg_off_the_floor_is_held_only_by_a_corner_pushed_nearly_flat(length: float) -> None:
+    # What the scenario's comment says: with the peg flush against a wall, a finger must push
+    # its top corner less than 46.6 degrees below horizontal; wedged across, 30.4 degrees; a
+    # fingertip pushing straight down on its top holds it nowhere.
+    flush, across = ("br", "tr"), ("bl", "tr")
+    assert _peg_held_off_the_floor(length, 46.0, flush) and not _peg_held_off_the_floor(length, 47.0, flush)
+    assert _peg_held_off_the_floor(length, 30.0, across) and not _peg_held_off_the_floor(length, 31.0, across)
+    for walls in (flush, across, ("bl", "tl"), ("br", "tl")):
+        assert not _peg_held_off_the_floor(length, 90.0, walls)
