@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry import mechanics
 from geometry.errors import GeometryError
-from geometry.poses import BoolArray, FloatArray, wrap_angle
+from geometry.poses import BoolArray, FloatArray, IntArray, wrap_angle
 
 __all__ = ["MAX_CONTACTS", "ForwardCheck", "alternative_motions", "screw_velocity"]
 
@@ -210,8 +210,17 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
     # instances grouped by which (ordered) slots are pressed: the equations differ
     patterns, group = np.unique(is_pressed, axis=0, return_inverse=True)
     group = np.asarray(group).reshape(-1)
+
+    def _record(hit: IntArray, twist: FloatArray, modes: NDArray[np.int8]) -> None:
+        ambiguous[hit] = True
+        found_twist[hit] = twist
+        back = np.zeros((hit.size, c), dtype=np.int8)
+        np.put_along_axis(back, order[hit], modes, axis=1)  # back to the caller's columns
+        found_modes[hit] = back
+
     for gi, pr in enumerate(patterns):
         in_group = group == gi
+        pending: list[tuple[IntArray, FloatArray, NDArray[np.int8], FloatArray]] = []
         for assign in itertools.product((_FREE, _STICK, _SLIDE), repeat=k):
             a = np.asarray(assign, dtype=np.int8)
             if (pr & (a == _FREE)).any():  # a pressed finger keeps touching
@@ -251,25 +260,34 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
                                                           mechanics.ContactMode.SEPARATING)),
                              mechanics.ContactMode.ABSENT).astype(np.int8)
             sdir = np.where((slide[None, :] & live[idx])[..., None], np.sign(r_t)[..., None] * tvec[idx], 0.0)
+            if pr.any():  # the force LPs of all the group's assignments in one call, after the loop
+                pending.append((idx, xi, modes, sdir))
+                continue
             contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
                                                   np.where(live[idx], m[idx], 0.0), modes, sdir)
-            if pr.any():
-                # one "finger" per press group; its force the group's pressed value
-                gid = grp_id[idx]
-                ids = np.unique(gid[:, pr])
-                finger_of = np.where(pr[None, :], np.searchsorted(ids, gid), -1)
-                held = np.full((idx.size, ids.size), np.nan)
-                for j, g in enumerate(ids):
-                    top = np.where(pr[None, :] & (gid == g), press[idx], -np.inf).max(axis=1)
-                    held[:, j] = np.where(np.isfinite(top), top, np.nan)
-                feas = mechanics.bounded_support(contacts, cm[idx], L, 1.0, finger_of, None, margin=0.0,
-                                                 fingers=ids.size, pressed=held).feasible
-            else:
-                feas = mechanics.feasible_batch(contacts, cm[idx], L, margin=0.0)
-            hit = idx[feas]
-            ambiguous[hit] = True
-            found_twist[hit] = xi[feas]
-            back = np.zeros((hit.size, c), dtype=np.int8)
-            np.put_along_axis(back, order[hit], modes[feas], axis=1)  # back to the caller's columns
-            found_modes[hit] = back
+            feas = mechanics.feasible_batch(contacts, cm[idx], L, margin=0.0)
+            _record(idx[feas], xi[feas], modes[feas])
+        if pending:
+            idx = np.concatenate([q[0] for q in pending])
+            xi = np.concatenate([q[1] for q in pending])
+            modes = np.concatenate([q[2] for q in pending])
+            sdir = np.concatenate([q[3] for q in pending])
+            contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
+                                                  np.where(live[idx], m[idx], 0.0), modes, sdir)
+            # one "finger" per press group; its force the group's pressed value
+            gid = grp_id[idx]
+            ids = np.unique(gid[:, pr])
+            finger_of = np.where(pr[None, :], np.searchsorted(ids, gid), -1)
+            held = np.full((idx.size, ids.size), np.nan)
+            for j, g in enumerate(ids):
+                top = np.where(pr[None, :] & (gid == g), press[idx], -np.inf).max(axis=1)
+                held[:, j] = np.where(np.isfinite(top), top, np.nan)
+            feas = mechanics.bounded_support(contacts, cm[idx], L, 1.0, finger_of, None, margin=0.0,
+                                             fingers=ids.size, pressed=held).feasible
+            # the first consistent alternative of each instance, in enumeration order
+            first = np.zeros(idx.size, dtype=bool)
+            _, at = np.unique(np.where(feas, idx, -1), return_index=True)
+            first[at] = True
+            keep = feas & first
+            _record(idx[keep], xi[keep], modes[keep])
     return ForwardCheck(ambiguous, found_twist, found_modes)

@@ -1462,13 +1462,20 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
 
     A press (the executor's guarded move, "press down": ``ldhp_tamp.plan.Press``) holds
     the finger's normal force at ``f`` through the step. With ``f`` it makes the motion
-    when (1) at every sample the contacts and modes of :func:`motion_conditioned` (the
-    finger sticking) balance the weight with the finger's normal force exactly ``f``
-    (:func:`geometry.mechanics.bounded_support` with ``pressed``), and (2) the object
-    cannot stay where it is at the first sample: its environment contacts (full cones)
-    do not balance the weight and the finger sliding over it, its force ``f`` along the
-    normal and ``mu f`` against the finger's motion. Other object motions are the
-    forward problem's to exclude (the judge, ``ldhp_tamp.executability``)."""
+    when, tested cheapest first on the grasps still in question,
+
+    (2) the object cannot stay where it is at the first sample: its environment contacts
+        (full cones) do not balance the weight and the finger sliding over it, its force
+        ``f`` along the normal and ``mu f`` along the finger's motion (a cone test with
+        that known wrench moved to the target);
+    (3) the forward problem (:func:`geometry.forward.alternative_motions`, the finger
+        pressed) has no other object motion at :data:`PRESS_FORWARD_SAMPLES` samples,
+        the first among them;
+    (1) at every sample the contacts and modes of :func:`motion_conditioned` (the finger
+        sticking) balance the weight with the finger's normal force exactly ``f``
+        (:func:`geometry.mechanics.bounded_support` with ``pressed``).
+
+    The judge (``ldhp_tamp.executability``) solves the forward problem at every waypoint."""
     p = np.asarray(path, dtype=float).reshape(-1, 3)
     r = np.asarray(rows, dtype=np.int64).reshape(-1)
     out = np.full(r.size, np.nan)
@@ -1491,31 +1498,36 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
     q = np.nan_to_num(grasps.contact[r])  # object frame (A, 2, 2)
     c1, s1 = np.cos(p[1, 2]), np.sin(p[1, 2])
     at1 = np.stack([c1 * q[..., 0] - s1 * q[..., 1] + p[1, 0], s1 * q[..., 0] + c1 * q[..., 1] + p[1, 1]], axis=-1)
-    moved = at1 - start.points[:, c:, :]  # (A, 2, 2)
-    nrm = start.normals[:, c:, :]
-    tang = np.stack([-nrm[..., 1], nrm[..., 0]], axis=-1)
-    vt = (moved * tang).sum(axis=-1)  # finger's tangential motion (A, 2)
-    own = vt[np.arange(r.size), finger]
-    slips = one & (np.abs(own) > 1e-9)
-    modes = np.array(start.modes)
-    modes[:, :c] = np.where(modes[:, :c] == mechanics.ContactMode.ABSENT, mechanics.ContactMode.ABSENT,
-                            mechanics.ContactMode.STICKING)
-    modes[np.arange(r.size), c + finger] = mechanics.ContactMode.SLIDING
-    sdir = np.zeros(start.points.shape)
-    sdir[np.arange(r.size), c + finger] = -np.sign(own)[:, None] * tang[np.arange(r.size), finger]
-    stay = mechanics.Contacts.trusted(start.points, start.normals, start.mu, modes.astype(np.int8), sdir)
-    todo = np.flatnonzero(slips)
+    a_ = np.arange(r.size)
+    moved = at1[a_, finger] - start.points[a_, c + finger]  # (A, 2)
+    nrm = start.normals[a_, c + finger]
+    tang = np.stack([-nrm[:, 1], nrm[:, 0]], axis=-1)
+    own = (moved * tang).sum(axis=-1)  # the finger's tangential motion
+    todo = np.flatnonzero(one & (np.abs(own) > 1e-9))
+    # staying, the environment keeps full cones and the finger's force is known: its
+    # normal f and its friction mu f against its motion over the object (a cone test)
+    env_only = mechanics.Contacts.trusted(start.points[:, :c], start.normals[:, :c], start.mu[:, :c],
+                                          np.where(start.modes[:, :c] == mechanics.ContactMode.ABSENT,
+                                                   mechanics.ContactMode.ABSENT,
+                                                   mechanics.ContactMode.STICKING).astype(np.int8))
+    gens, _ = mechanics.wrench_generators(env_only, com0, length)
+    mu_f = start.mu[a_, c + finger]
+    # per newton of press, the finger's force on the object: friction drags it along the finger's motion
+    unit = nrm + (mu_f * np.sign(own))[:, None] * tang
+    arm = start.points[a_, c + finger] - com0
+    moment = (arm[:, 0] * unit[:, 1] - arm[:, 1] * unit[:, 0]) / length
+    unit_wrench = np.column_stack([unit, moment]) / weight
+    ey = np.array([0.0, 1.0, 0.0])
     order = _spread_order(p.shape[0])
     for f in forces:
         if not todo.size:
             break
-        held = np.full((todo.size, 2), np.nan)
-        held[np.arange(todo.size), finger[todo]] = f
-        stays = mechanics.bounded_support(stay.select(todo), com0[todo], length, weight, finger_of, None, margin=0.0,
-                                          pressed=held).feasible
+        stays = mechanics.cone_contains(gens[todo], ey[None, :] - f * unit_wrench[todo], 0.0)
         alive = todo[~stays]
+        if alive.size:  # (3) no other motion under the press, where the motion starts
+            alive = alive[~_press_alternatives(world, grasps, p, r[alive], finger[alive], env, f)]
         start_at, size = 0, 2
-        while alive.size and start_at < order.size:
+        while alive.size and start_at < order.size:  # (1) the planned motion balances with f
             samples = order[start_at:start_at + size]
             start_at, size = start_at + size, size * 4
             _, allc, com = _instances(world, grasps, r[alive], p, env, samples)
@@ -1524,8 +1536,6 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
             ok = mechanics.bounded_support(allc, com, length, weight, finger_of, limit, margin=0.0,
                                            pressed=held).feasible.reshape(alive.size, samples.size)
             alive = alive[ok.all(axis=1)]
-        if alive.size:
-            alive = alive[~_press_alternatives(world, grasps, p, r[alive], finger[alive], env, f)]
         out[alive] = f
         todo = np.setdiff1d(todo, alive)
     return out
@@ -1533,7 +1543,7 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
 
 #: Samples (the first, then spread over the path) at which :func:`press_forces` solves
 #: the forward problem of a pressed grasp.
-PRESS_FORWARD_SAMPLES = 4
+PRESS_FORWARD_SAMPLES = 2
 
 
 def _press_alternatives(world: World, grasps: GraspSet, p: FloatArray, rows: IntArray, finger: IntArray,

@@ -1222,6 +1222,46 @@ def _lp_block(G: FloatArray, A: FloatArray, ub: FloatArray, fixed: FloatArray | 
     return np.asarray(res.x, dtype=float).reshape(b, nv)[:, :K]
 
 
+def _lp_phase1(G: FloatArray, A: FloatArray, ub: FloatArray, fixed: FloatArray | None = None) -> BoolArray | None:
+    """(b,) which instances of a chunk of :func:`_lp_block` have a feasible point: one
+    block-diagonal LP, always feasible, minimising per instance the slack its equalities
+    need (``G lam + s+ - s- = e_y``, and the fixed rows); feasible where the slack is at
+    most :data:`FEASIBILITY_MARGIN`. ``None`` when HiGHS does not report an optimum. It
+    lets one infeasible instance leave its chunk instead of sending every instance of the
+    chunk to an LP of its own."""
+    import scipy.sparse as sp
+    from scipy.optimize import linprog
+
+    b, _, K = G.shape
+    F = A.shape[1]
+    fx = np.full((b, F), np.nan) if fixed is None else fixed
+    R = 3 + F
+    nv = K + 2 * R
+    rows = np.arange(b)[:, None] * R  # first row of each instance
+    # G rows, then one row per finger (zero where the finger is not fixed)
+    M = np.concatenate([G, np.where(np.isfinite(fx)[..., None], A, 0.0)], axis=1)  # (b, R, K)
+    rr = np.broadcast_to((rows + np.arange(R)[None, :])[..., None], M.shape)
+    cc = np.broadcast_to((np.arange(b) * nv)[:, None, None] + np.arange(K)[None, None, :], M.shape)
+    sr = np.broadcast_to(rows + np.arange(R)[None, :], (b, R))
+    plus = (np.arange(b) * nv)[:, None] + K + np.arange(R)[None, :]
+    minus = plus + R
+    data = np.concatenate([M.reshape(-1), np.ones(b * R), -np.ones(b * R)])
+    ri = np.concatenate([rr.reshape(-1), sr.reshape(-1), sr.reshape(-1)])
+    ci = np.concatenate([cc.reshape(-1), plus.reshape(-1), minus.reshape(-1)])
+    eq = sp.coo_array((data, (ri, ci)), shape=(R * b, nv * b)).tocsr()
+    rhs = np.concatenate([np.broadcast_to(_EY, (b, 3)), np.nan_to_num(fx)], axis=1).reshape(-1)
+    c = np.zeros((b, nv))
+    c[:, K:] = 1.0
+    bounds = np.zeros((b, nv, 2))
+    bounds[:, :K, 1] = ub
+    bounds[:, K:, 1] = np.inf
+    res = linprog(c.reshape(-1), A_eq=eq, b_eq=rhs, bounds=bounds.reshape(-1, 2), method="highs")
+    if res.status != 0 or res.x is None:
+        return None
+    slack = np.asarray(res.x, dtype=float).reshape(b, nv)[:, K:].sum(axis=1)
+    return slack <= FEASIBILITY_MARGIN
+
+
 def bounded_support(
     contacts: Contacts,
     com: ArrayLike,
@@ -1328,15 +1368,21 @@ def bounded_support(
             sl = slice(s, min(s + _LP_CHUNK, todo.size))
             fx = None if fixed is None else fixed[todo[sl]]
             x = _lp_block(G[sl], A[sl], ub[sl], fx)
-            if x is None:  # one troublesome instance must not spoil the chunk
-                logger.debug("bounded_support: chunk LP not optimal, solving its %d instances one by one",
-                             sl.stop - sl.start)
+            if x is None:  # an infeasible (or troublesome) instance must not spoil the chunk
                 x = np.full((sl.stop - sl.start, G.shape[2]), np.nan)
-                for j in range(sl.stop - sl.start):
-                    one = _lp_block(G[sl][j:j + 1], A[sl][j:j + 1], ub[sl][j:j + 1],
-                                    None if fx is None else fx[j:j + 1])
-                    if one is not None:
-                        x[j] = one[0]
+                can = _lp_phase1(G[sl], A[sl], ub[sl], fx)
+                go = np.flatnonzero(can) if can is not None else np.arange(sl.stop - sl.start)
+                sub = None if not go.size else _lp_block(G[sl][go], A[sl][go], ub[sl][go],
+                                                           None if fx is None else fx[go])
+                if sub is not None:
+                    x[go] = sub
+                elif go.size:
+                    logger.debug("bounded_support: chunk LP not optimal, solving its %d instances one by one", go.size)
+                    for j in go:
+                        one = _lp_block(G[sl][j:j + 1], A[sl][j:j + 1], ub[sl][j:j + 1],
+                                        None if fx is None else fx[j:j + 1])
+                        if one is not None:
+                            x[j] = one[0]
             x = np.maximum(x, 0.0)
             residual = np.abs(np.einsum("bik,bk->bi", G[sl], x) - _EY).max(axis=1)
             if fx is not None:
