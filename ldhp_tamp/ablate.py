@@ -15,8 +15,10 @@ ablation. Data flows through plain functions over small values::
     write_csv(table, "ablation.csv")                     # removed,scenario,feasible,reason,...
 
 A cell is feasible (``Y``) when the solve returns a plan that the validator accepts and
-that uses only the actions of the ablated domain; anything else (no plan, a time limit,
-an error) is ``N``, with the status and the reason kept in the cell.
+that uses only the actions of the ablated domain (with ``simulate``, one that executes in
+the physics simulation too: the solve's judge replays every plan it finds and goes on
+past those that diverge); anything else (no plan, a time limit, an error) is ``N``, with
+the status and the reason kept in the cell.
 
 Solves at once. With ``jobs`` 1 and the ``local`` executor the cells are solved in this
 process, one after the other. Otherwise each cell is a process of its own through
@@ -120,6 +122,9 @@ class AblationOptions:
     executor, scheduler
         ``local`` or ``dask``, and the ``dask`` scheduler's address (``tcp://HOST:PORT``;
         ``None``: a ``LocalCluster`` of ``jobs`` workers): :mod:`ldhp_tamp.sweep`.
+    simulate
+        Solve with the simulation judge (``SolveOptions(simulate=True)``): a cell is
+        ``Y`` only for a plan that executes in the physics simulation.
 
     Raises
     ------
@@ -135,6 +140,7 @@ class AblationOptions:
     grace_s: float = 10.0
     executor: str = "local"
     scheduler: str | None = None
+    simulate: bool = False
 
     def __post_init__(self) -> None:
         check_executor(self.executor, self.scheduler)
@@ -438,6 +444,7 @@ class _Job:
     domain_file: str
     actions: tuple[str, ...]  # the ablated domain's actions
     timeout_s: float | None
+    simulate: bool = False
 
 
 def _solve_job(job: _Job) -> AblationCell:
@@ -474,7 +481,7 @@ def _solve(job: _Job, start: float) -> AblationCell:
     from ldhp_tamp.validate import validate_plan
 
     scenario = load_scenario(job.scenario_file)
-    knobs: dict[str, object] = {"domain": Path(job.domain_file)}
+    knobs: dict[str, object] = {"domain": Path(job.domain_file), "simulate": job.simulate}
     if job.timeout_s is not None and solver_has_timeout():
         knobs["timeout"] = job.timeout_s
     result = solve(scenario, SolveOptions(**knobs))  # type: ignore[arg-type]
@@ -610,7 +617,8 @@ def ablate(scenarios: Sequence[str | os.PathLike[str]], options: AblationOptions
             ablated = symbolic.load_domain(path).info
             check_against_domain(ablated, REGISTRY)
             copies[removed] = (path, ablated.names())
-        jobs = [_Job(removed, sc.name, str(p), str(copies[removed][0]), copies[removed][1], options.timeout_s)
+        jobs = [_Job(removed, sc.name, str(p), str(copies[removed][0]), copies[removed][1], options.timeout_s,
+                     options.simulate)
                 for removed in copies for p, sc in loaded]
         by_key: dict[tuple[str, str], AblationCell] = {}
         if csv_path is not None and resume and Path(csv_path).exists():

@@ -291,7 +291,8 @@ def cmd_ablate(args: argparse.Namespace) -> int:
 
     options = AblationOptions(domain=args.domain, remove=args.remove, timeout_s=args.timeout,
                               jobs=args.jobs, keep_domains=Path(args.keep_domains) if args.keep_domains else None,
-                              grace_s=args.grace, executor=args.executor, scheduler=args.scheduler)
+                              grace_s=args.grace, executor=args.executor, scheduler=args.scheduler,
+                              simulate=args.simulate)
     quiet = args.quiet
 
     def progress(msg: str) -> None:
@@ -495,6 +496,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "a solve in a process of its own is stopped at S + --grace (status 'timeout')")
     p.add_argument("--grace", type=float, default=10.0, metavar="S",
                    help="seconds added to --timeout for the hard limit (default 10)")
+    p.add_argument("--simulate", action="store_true",
+                   help="Y only for a plan that executes in the physics simulation too (solve --simulate)")
     p.add_argument("--jobs", type=int, default=1, metavar="J",
                    help="solves at once, each in a process of its own (default 1: in this process)")
     _add_executor(p)

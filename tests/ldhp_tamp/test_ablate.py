@@ -235,3 +235,21 @@ def test_a_solve_out_of_time_is_a_timeout_cell() -> None:
                                                                   ("tip", False, "timeout")]
     text = format_table(table)
     assert "| none (baseline) | N |" in text and "- baseline, example-pick: timeout: " in text
+
+
+def test_with_simulate_a_cell_is_solved_with_the_simulation_judge(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``simulate`` reaches the solve of every cell (``SolveOptions(simulate=True)``): a
+    cell is then Y only for a plan the physics replay executes."""
+    import ldhp_tamp.tamp as tamp
+
+    seen: list[bool] = []
+    real = tamp.solve
+
+    def spy(scenario, options=tamp.SolveOptions(), progress=None):  # type: ignore[no-untyped-def]
+        seen.append(options.simulate)
+        return real(scenario, options, progress)
+
+    monkeypatch.setattr(tamp, "solve", spy)
+    table = ablate([PICK], AblationOptions(remove=("flip",), simulate=True))
+    assert seen and all(seen)
+    assert table.feasible("flip", table.scenarios[0])
