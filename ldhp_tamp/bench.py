@@ -123,6 +123,10 @@ class BenchOptions:
     simulate: bool = True
     """Replay every solved plan in the physics simulation (:mod:`ldhp_tamp.simulate`):
     the ``executes`` column."""
+    judge_simulate: bool = False
+    """Solve with the simulation judge (``SolveOptions(simulate=True)``, ``solve
+    --simulate``): a plan that diverges is fed back and the search goes on, so a solved
+    plan executes. The planners that take no such option ignore it."""
     executor: str = "local"
     """Where the runs go: ``local`` processes or ``dask`` (:mod:`ldhp_tamp.sweep`)."""
     scheduler: str | None = None
@@ -178,6 +182,7 @@ class RunSpec:
     plan_file: str | None = None
     simulate: bool = True
     planner: str = "ldhp"
+    judge_simulate: bool = False
 
 
 @dataclass(frozen=True)
@@ -298,7 +303,8 @@ def plan_runs(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions
                         specs.append(RunSpec(index=len(specs), scenario_file=str(path), scenario=sc.name,
                                              engine=engine, seed=seed, samples_per_edge=k,
                                              object_vertices=sc.world.object.n, timeout_s=options.timeout_s,
-                                             simulate=options.simulate, planner=planner))
+                                             simulate=options.simulate, planner=planner,
+                                             judge_simulate=options.judge_simulate))
     return tuple(specs)
 
 
@@ -323,7 +329,7 @@ def solve_run(spec: RunSpec) -> BenchRow:
     start = time.perf_counter()
     scenario = load_scenario(spec.scenario_file)
     knobs: dict[str, Any] = {"engine": spec.engine or None, "seed": spec.seed,
-                             "samples_per_edge": spec.samples_per_edge}
+                             "samples_per_edge": spec.samples_per_edge, "simulate": spec.judge_simulate}
     if spec.timeout_s is not None and solver_has_timeout():
         knobs["timeout"] = spec.timeout_s
     result = get_planner(spec.planner)(scenario, SolveOptions(**knobs))

@@ -228,3 +228,18 @@ def test_bench_plots_flag_draws_time_against_k(tmp_path: Path, capsys: pytest.Ca
     for name in ("time_vs_samples.png", "time_vs_samples.svg", "comparison.png", "comparison.svg"):
         assert (out / name).stat().st_size > 1000 and name in stdout
     assert not (out / "time_vs_vertices.png").exists()  # one object: no vertex figure
+
+
+def test_judge_simulate_solves_with_the_simulation_judge(tmp_path: Path) -> None:
+    """``judge_simulate``: every run's solve has the physics replay as a judge (``solve
+    --simulate``), whose time the plan's stats then show."""
+    from ldhp_tamp.plan import read_plan
+
+    (spec,) = plan_runs([PICK], BenchOptions(judge_simulate=True))
+    assert spec.judge_simulate
+    spec = dataclasses.replace(spec, plan_file=str(tmp_path / "pick-plan.json"))
+    (row,) = run_all([spec], BenchOptions(judge_simulate=True))
+    assert row.status is BenchStatus.SOLVED
+    assert "simulation" in read_plan(tmp_path / "pick-plan.json").stats.time_s
+    (plain,) = plan_runs([PICK], BenchOptions())
+    assert not plain.judge_simulate
