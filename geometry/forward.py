@@ -291,3 +291,148 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
             keep = feas & first
             _record(idx[keep], xi[keep], modes[keep])
     return ForwardCheck(ambiguous, found_twist, found_modes)
+
+
+def falling_accelerations(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, present: ArrayLike,
+                          com: ArrayLike, gyration_sq: float, probe_points: ArrayLike, probe_normals: ArrayLike,
+                          *, tol: float = 1e-6) -> tuple[BoolArray, BoolArray]:
+    """Which way the object starts to move from rest when nothing but the environment
+    holds it, and whether that motion presses it onto a probe contact.
+
+    The rigid-body contact problem at one instant, from rest (no velocities): the object's
+    acceleration ``a = (a_x, a_y, alpha)`` (gravity 1, mass 1, ``gyration_sq`` its radius of
+    gyration squared about the COM, mm^2) and the environment contacts' forces (weights)
+    satisfy ``a_lin = (0, -1) + sum F``, ``k^2 alpha = sum (p - com) x F``; each contact is
+    STICKING (its point does not accelerate, force in the cone), SLIDING either way (no
+    normal acceleration, force on the cone edge opposing the tangential acceleration, which
+    it has) or SEPARATING (no force, no acceleration into the solid). Every assignment gives
+    a square linear system; a consistent solution is one whose signs hold.
+
+    Parameters
+    ----------
+    points, normals : array_like, shape (B, C, 2)
+        Environment contacts: points and unit normals into the object.
+    mu : array_like, shape (B, C)
+    present : array_like of bool, shape (B, C)
+    com : array_like, shape (B, 2)
+    gyration_sq : float
+    probe_points, probe_normals : array_like, shape (B, 2)
+        A finger contact (its normal into the object) the answer is about.
+
+    Returns
+    -------
+    falls : ndarray of bool, shape (B,)
+        Some consistent solution accelerates the object (it does not rest alone).
+    onto_probe : ndarray of bool, shape (B,)
+        Some consistent nonzero solution moves the object's material point at the probe
+        against the probe's normal (onto the finger): the object leans on it.
+
+    Examples
+    --------
+    A block balanced on its bottom-left corner, tilted 10 degrees counter-clockwise,
+    falls back clockwise: away from a finger on its top face, onto one on its right side.
+
+    >>> import math
+    >>> c, s = math.cos(math.radians(10)), math.sin(math.radians(10))
+    >>> com = [[c * 40 - s * 20, s * 40 + c * 20]]
+    >>> top = [[c * 40 - s * 40, s * 40 + c * 40]]
+    >>> falls, onto = falling_accelerations([[[0.0, 0.0]]], [[[0.0, 1.0]]], [[0.5]], [[True]], com,
+    ...                                     (80 ** 2 + 40 ** 2) / 12, top, [[s, -c]])
+    >>> bool(falls[0]), bool(onto[0])
+    (True, False)
+    """
+    p = np.asarray(points, dtype=float)
+    n = np.asarray(normals, dtype=float)
+    b, c = p.shape[:2]
+    m = np.broadcast_to(np.asarray(mu, dtype=float), (b, c))
+    live = np.broadcast_to(np.asarray(present, dtype=bool), (b, c))
+    cm = np.broadcast_to(np.asarray(com, dtype=float).reshape(-1, 2), (b, 2))
+    pp = np.broadcast_to(np.asarray(probe_points, dtype=float).reshape(-1, 2), (b, 2))
+    pn = np.broadcast_to(np.asarray(probe_normals, dtype=float).reshape(-1, 2), (b, 2))
+    k2 = float(gyration_sq)
+    order = np.argsort(~live, axis=1, kind="stable")
+    tk = lambda a: np.take_along_axis(a, order[..., None] if a.ndim == 3 else order, axis=1)  # noqa: E731
+    p, n, m, live = tk(p), tk(n), tk(m), tk(live)
+    t = np.stack([-n[..., 1], n[..., 0]], axis=-1)
+    d = p - cm[:, None, :]
+    falls = np.zeros(b, dtype=bool)
+    onto = np.zeros(b, dtype=bool)
+    count = live.sum(axis=1)
+    FREE, STICK, SPLUS, SMINUS = 0, 1, 2, 3
+    for kk in np.unique(count):
+        rows = np.flatnonzero(count == kk)
+        for assign in itertools.product((FREE, STICK, SPLUS, SMINUS), repeat=int(kk)):
+            a_ = np.asarray(assign, dtype=np.int8)
+            n_st, n_sl = int((a_ == STICK).sum()), int((a_ >= SPLUS).sum())
+            nu = 3 + 2 * n_st + n_sl
+            r = rows.size
+            M = np.zeros((r, nu, nu))
+            rhs = np.zeros((r, nu))
+            # dynamics rows: a_lin - sum F = (0, -1); k2 alpha - sum d x F = 0
+            M[:, 0, 0] = 1.0
+            M[:, 1, 1] = 1.0
+            M[:, 2, 2] = k2
+            rhs[:, 1] = -1.0
+            col, row = 3, 3
+            kin: list[tuple[int, int, str]] = []  # (contact, unknown column, kind)
+            for j, mode in enumerate(a_):
+                dj = d[rows, j]
+                nj, tj, mj = n[rows, j], t[rows, j], m[rows, j]
+                if mode == FREE:
+                    continue
+                if mode == STICK:
+                    dirs = [nj, tj]
+                else:
+                    sgn = 1.0 if mode == SPLUS else -1.0
+                    dirs = [nj - sgn * mj[:, None] * tj]
+                for dvec in dirs:
+                    M[:, 0, col] = -dvec[:, 0]
+                    M[:, 1, col] = -dvec[:, 1]
+                    M[:, 2, col] = -(dj[:, 0] * dvec[:, 1] - dj[:, 1] * dvec[:, 0])
+                    kin.append((j, col, "force"))
+                    col += 1
+                # kinematic rows: the point's acceleration a_lin + alpha J d
+                comps = [nj, tj] if mode == STICK else [nj]
+                for e in comps:
+                    M[:, row, 0] = e[:, 0]
+                    M[:, row, 1] = e[:, 1]
+                    M[:, row, 2] = -dj[:, 1] * e[:, 0] + dj[:, 0] * e[:, 1]
+                    row += 1
+            det_ok = np.abs(np.linalg.det(M)) > 1e-12 * np.maximum(np.abs(M).max(axis=(1, 2)) ** nu, 1e-300)
+            if not det_ok.any():
+                continue
+            sol = np.full((r, nu), np.nan)
+            sol[det_ok] = np.linalg.solve(M[det_ok], rhs[det_ok][..., None])[..., 0]
+            ok = det_ok.copy()
+            acc = sol[:, :3]
+
+            def point_acc(j: int) -> FloatArray:
+                dj = d[rows, j]
+                return acc[:, :2] + acc[:, 2:3] * np.stack([-dj[:, 1], dj[:, 0]], axis=-1)
+
+            col = 3
+            for j, mode in enumerate(a_):
+                apj = point_acc(j)
+                an = (apj * n[rows, j]).sum(axis=1)
+                at = (apj * t[rows, j]).sum(axis=1)
+                if mode == FREE:
+                    ok &= an >= -tol
+                    continue
+                if mode == STICK:
+                    fn_, ft_ = sol[:, col], sol[:, col + 1]
+                    ok &= (fn_ >= -tol) & (np.abs(ft_) <= m[rows, j] * fn_ + tol)
+                    col += 2
+                else:
+                    sgn = 1.0 if mode == SPLUS else -1.0
+                    ok &= (sol[:, col] >= -tol) & (sgn * at > tol)
+                    col += 1
+            moving = np.abs(acc).max(axis=1) > tol
+            good = ok & moving
+            if not good.any():
+                continue
+            g = rows[good]
+            falls[g] = True
+            dp = pp[g] - cm[g]
+            ap = acc[good, :2] + acc[good, 2:3] * np.stack([-dp[:, 1], dp[:, 0]], axis=-1)
+            onto[g] |= (ap * pn[g]).sum(axis=1) < -tol
+    return falls, onto

@@ -29,13 +29,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from geometry import collision, mechanics
-from geometry.forward import MAX_CONTACTS, alternative_motions, screw_velocity
+from geometry.forward import MAX_CONTACTS, alternative_motions, falling_accelerations, screw_velocity
 # How far ahead (finger travel, mm; and waypoints) the fingers must push into an object
 # that stays put for a planned object motion to be forced (:func:`_object_may_stay`):
 # the bottom tier's G_m makes the same test at a segment's start, with the same bounds.
 from geometry.grasps import STAY_SAMPLES as _STAY_AHEAD
 from geometry.grasps import STAY_TRAVEL
-from geometry.poses import BoolArray, transform_points, wrap_angle
+from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
 from geometry.shapes import FloatArray
 from geometry.tolerances import PENETRATION_TOL
 from ldhp_tamp.plan import Plan
@@ -140,6 +140,55 @@ def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: Float
     return out
 
 
+def _gyration_sq(world: World) -> float:
+    """The object's radius of gyration squared about its COM (mm^2), uniform density."""
+    v = world.object.polygon.vertices - world.object.com
+    w = np.roll(v, -1, axis=0)
+    cross = v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]
+    area = cross.sum() / 2.0
+    polar = np.sum(cross * (v[:, 0] ** 2 + v[:, 0] * w[:, 0] + w[:, 0] ** 2
+                            + v[:, 1] ** 2 + v[:, 1] * w[:, 1] + w[:, 1] ** 2)) / 12.0
+    return float(abs(polar / area))
+
+
+def _falls_off_the_finger(world: World, flat: PlanArrays, c: PlanContacts, com: FloatArray, rows: IntArray
+                          ) -> BoolArray:
+    """(len(rows),) of waypoints ``rows`` (one finger touching, no press), whether the
+    object, which does not rest on the environment alone there, would start to move away
+    from the finger if the finger gave no force (:func:`geometry.forward.falling_accelerations`):
+    a finger moved by position control, not pressed, carries force only where the object
+    leans on it (or where the finger pushes into it, which the finger's own motion does not
+    say here: the motion is planned with the finger sticking)."""
+    out = np.zeros(rows.size, dtype=bool)
+    if not rows.size:
+        return out
+    env = c.on[rows] & (c.finger < 0)[None, :]
+    fin = c.on[rows] & (c.finger >= 0)[None, :]
+    # the finger's contact: its first candidate column (points coincide; normals may differ)
+    fcol = np.argmax(fin, axis=1)
+    probe_p = c.points[rows, fcol]
+    probe_n = c.normals[rows, fcol]
+    k2 = _gyration_sq(world)
+    cand = np.flatnonzero(env.any(axis=1))
+    rest = np.zeros(rows.size, dtype=bool)
+    for grp in present_groups(env[cand]):
+        def take(a: np.ndarray, grp: PresentGroup = grp) -> np.ndarray:
+            return grp.take(a[rows[cand]])
+
+        sel = cand[grp.rows]
+        rest[sel] = mechanics.feasible_batch(mechanics.Contacts.make(take(c.points), take(c.normals), take(c.mu)),
+                                             com[rows[sel]], world.object.length_scale, margin=0.0)
+        todo = ~rest[sel]
+        if not todo.any():
+            continue
+        s2 = sel[todo]
+        pts, nrm, mu = take(c.points)[todo], take(c.normals)[todo], take(c.mu)[todo]
+        falls, onto = falling_accelerations(pts, nrm, mu, np.ones(pts.shape[:2], bool), com[rows[s2]], k2,
+                                            probe_p[s2], probe_n[s2])
+        out[s2] = falls & ~onto
+    return out
+
+
 def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
     """The forward problem at every waypoint of ``plan`` but the last (see the module
     docstring). Waypoints with more than :data:`~geometry.forward.MAX_CONTACTS` contacts
@@ -212,6 +261,17 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
                 first = (i, _describe(labels, res.modes[j], res.twist[j]))
     stays = _object_may_stay(world, flat, c, com0, squeeze)
     stays[rows[pressed_rows]] = False  # a pressed finger's friction: the enumeration decides
+    # one finger, not pressed, on an object the environment alone does not hold: it carries
+    # force only where the object leans on it
+    one_finger = (f1.any(axis=1) ^ f2.any(axis=1)) & moving & ~pressed_rows & (flat.step[nxt] == flat.step[rows])
+    lone = rows[one_finger]
+    off = _falls_off_the_finger(world, flat, c, com0, lone)
+    for i in lone[off]:
+        ambiguous[i] = True
+        if first is None or i < first[0]:
+            first = (int(i), "left to gravity the object falls away from the one finger that holds it: moved by "
+                             "position control, not pressed, the finger carries no force there")
+        break
     for i in np.flatnonzero(stays):
         ambiguous[i] = True
         if first is None or i < first[0]:

@@ -84,3 +84,28 @@ def test_a_pressed_finger_drags_a_lying_block_above_the_friction_ratio() -> None
     assert alternative_motions(*args, pressed=[[np.nan, np.nan, 0.9 * threshold]]).ambiguous[0]
     assert not alternative_motions(*args, pressed=[[np.nan, np.nan, 1.1 * threshold]]).ambiguous[0]
     assert not alternative_motions(*args, pressed=[[np.nan, np.nan, 2.0]]).ambiguous[0]
+
+
+def test_a_block_on_its_corner_falls_back_away_from_its_top_and_onto_its_far_side() -> None:
+    """An 100 x 70 block tilted 10 degrees counter-clockwise on its bottom-left corner
+    (mu 0.5) falls back clockwise: its top face and left side move away from a finger
+    there, its right side onto one (the block leans on a finger only there). Resting flat
+    it does not fall at all."""
+    from geometry.forward import falling_accelerations
+
+    th = np.radians(10.0)
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    com = R @ [50.0, 35.0]
+    k2 = (100.0 ** 2 + 70.0 ** 2) / 12.0
+    probes = {"top": ([50.0, 70.0], [0.0, -1.0]), "left": ([0.0, 35.0], [1.0, 0.0]),
+              "right": ([100.0, 35.0], [-1.0, 0.0])}
+    onto = {}
+    for name, (p, n) in probes.items():
+        falls, on = falling_accelerations([[[0.0, 0.0]]], [[[0.0, 1.0]]], [[0.5]], [[True]], [com], k2,
+                                          [R @ p], [R @ n])
+        assert falls[0]
+        onto[name] = bool(on[0])
+    assert onto == {"top": False, "left": False, "right": True}
+    flat_falls, _ = falling_accelerations([[[0.0, 0.0], [100.0, 0.0]]], [[[0.0, 1.0], [0.0, 1.0]]], [[0.5, 0.5]],
+                                          [[True, True]], [[50.0, 35.0]], k2, [[50.0, 70.0]], [[0.0, -1.0]])
+    assert not flat_falls[0]

@@ -21,6 +21,12 @@ from ldhp_tamp.plan import Family, Press, Step, read_plan_string
 from ldhp_tamp.scenario import load_scenario_string
 from ldhp_tamp.validate import press_table, support_analysis, validate_plan
 
+WALL = """
+[[environment.solids]]
+name = "wall"
+vertices = [[-50, 0], [0, 0], [0, 100], [-50, 100]]
+"""
+
 DRAG = """
 format = "ldhp-scenario/1"
 name = "drag-at-wall"
@@ -33,11 +39,7 @@ mass = 0.5
 [[environment.solids]]
 name = "table"
 vertices = [[-300, -50], [300, -50], [300, 0], [-300, 0]]
-
-[[environment.solids]]
-name = "wall"
-vertices = [[-50, 0], [0, 0], [0, 100], [-50, 100]]
-
+""" + WALL + """
 [gripper]
 model = "polyline"
 finger = [[0, 0], [10, 0], [10, 45], [0, 45]]
@@ -176,3 +178,39 @@ def test_the_planner_drags_with_a_press_and_the_plan_executes(scenario) -> None:
     assert validate_plan(res.plan, scenario).valid
     assert forward_check(res.plan, scenario).ok
     assert simulate_plan(res.plan, scenario).executes
+
+
+# -- a lone finger that the object falls away from ----------------------------------------
+
+
+def tip_plan(press: dict | None) -> str:
+    """The block tipped counter-clockwise about its bottom-left corner from 10 to 20
+    degrees by finger 1's tip on its top face (object frame (10, 70)), dragging the top
+    leftwards through friction (a table with mu_e = 0.5 holds the corner): left to
+    gravity the block falls back, away from that finger."""
+    import math
+
+    wps = []
+    for k in range(11):
+        th = math.radians(10.0 + k)
+        c, s = math.cos(th), math.sin(th)
+        grip = [c * 80 - s * 70, s * 80 + c * 70, math.degrees(th)]  # 140 mm open: finger 2 beyond the block
+        wps.append({"object": [0, 0, math.degrees(th)], "gripper": grip, "width": 140,
+                    "finger_contacts": [[c * 10 - s * 70, s * 10 + c * 70], None]})
+    plan = json.loads(drag_plan(press))
+    plan["steps"][0]["primitive"] = "tip"
+    plan["steps"][0]["waypoints"] = wps
+    return json.dumps(plan)
+
+
+def test_a_lone_finger_the_object_falls_away_from_carries_no_force() -> None:
+    """Unpressed, the tip balances (rules 7-8: the finger's friction holds it) but a finger
+    moved by position control gives no force where the object falls away from it: the
+    judge refuses it (the quarter turn's plan of a plain solve diverged in simulation so)."""
+    open_table = load_scenario_string(DRAG.replace(WALL, "").replace("environment = 0.03", "environment = 0.5"),
+                                      "table.toml")
+    broken = validate_plan(read_plan_string(tip_plan(None)), open_table).rules_broken
+    assert broken <= {1}  # only its ends (it starts tilted): rules 7-8 hold, the finger's friction holds it
+    report = forward_check(read_plan_string(tip_plan(None)), open_table)
+    assert not report.ok and report.waypoint == 0
+    assert "falls away from the one finger" in report.reason
