@@ -274,16 +274,19 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
             sdir = np.concatenate([q[3] for q in pending])
             contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
                                                   np.where(live[idx], m[idx], 0.0), modes, sdir)
-            # one "finger" per press group; its force the group's pressed value
-            gid = grp_id[idx]
-            ids = np.unique(gid[:, pr])
-            finger_of = np.where(pr[None, :], np.searchsorted(ids, gid), -1)
-            held = np.full((idx.size, ids.size), np.nan)
-            for j, g in enumerate(ids):
-                top = np.where(pr[None, :] & (gid == g), press[idx], -np.inf).max(axis=1)
-                held[:, j] = np.where(np.isfinite(top), top, np.nan)
-            feas = mechanics.bounded_support(contacts, cm[idx], L, 1.0, finger_of, None, margin=0.0,
-                                             fingers=ids.size, pressed=held).feasible
+            if int(pr.sum()) == 1:  # one pressed contact: exact cone tests
+                slot = int(np.flatnonzero(pr)[0])
+                feas = mechanics.pressed_feasible(contacts, cm[idx], L, np.full(idx.size, slot), press[idx, slot])
+            else:  # one "finger" per press group, its force the group's pressed value: the LP
+                gid = grp_id[idx]
+                ids = np.unique(gid[:, pr])
+                finger_of = np.where(pr[None, :], np.searchsorted(ids, gid), -1)
+                held = np.full((idx.size, ids.size), np.nan)
+                for j, g in enumerate(ids):
+                    top = np.where(pr[None, :] & (gid == g), press[idx], -np.inf).max(axis=1)
+                    held[:, j] = np.where(np.isfinite(top), top, np.nan)
+                feas = mechanics.bounded_support(contacts, cm[idx], L, 1.0, finger_of, None, margin=0.0,
+                                                 fingers=ids.size, pressed=held).feasible
             # the first consistent alternative of each instance, in enumeration order
             first = np.zeros(idx.size, dtype=bool)
             _, at = np.unique(np.where(feas, idx, -1), return_index=True)

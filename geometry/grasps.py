@@ -1473,7 +1473,7 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
         the first among them;
     (1) at every sample the contacts and modes of :func:`motion_conditioned` (the finger
         sticking) balance the weight with the finger's normal force exactly ``f``
-        (:func:`geometry.mechanics.bounded_support` with ``pressed``).
+        (:func:`geometry.mechanics.pressed_feasible`, cone tests).
 
     The judge (``ldhp_tamp.executability``) solves the forward problem at every waypoint."""
     p = np.asarray(path, dtype=float).reshape(-1, 3)
@@ -1492,7 +1492,6 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
     one = touch.sum(axis=1) == 1
     finger = np.argmax(touch, axis=1)
     c = env.points.shape[1]
-    finger_of = np.concatenate([np.full(c, -1), [0, 1]])
     # (2) the object staying: the finger's velocity over the first motion, its slip against the object
     _, start, com0 = _instances(world, grasps, r, p, env, np.array([0]))
     q = np.nan_to_num(grasps.contact[r])  # object frame (A, 2, 2)
@@ -1531,10 +1530,8 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
             samples = order[start_at:start_at + size]
             start_at, size = start_at + size, size * 4
             _, allc, com = _instances(world, grasps, r[alive], p, env, samples)
-            held = np.full((alive.size * samples.size, 2), np.nan)
-            held[np.arange(held.shape[0]), np.repeat(finger[alive], samples.size)] = f
-            ok = mechanics.bounded_support(allc, com, length, weight, finger_of, limit, margin=0.0,
-                                           pressed=held).feasible.reshape(alive.size, samples.size)
+            ok = mechanics.pressed_feasible(allc, com, length, c + np.repeat(finger[alive], samples.size),
+                                            f / weight).reshape(alive.size, samples.size)
             alive = alive[ok.all(axis=1)]
         out[alive] = f
         todo = np.setdiff1d(todo, alive)

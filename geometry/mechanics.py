@@ -1222,6 +1222,52 @@ def _lp_block(G: FloatArray, A: FloatArray, ub: FloatArray, fixed: FloatArray | 
     return np.asarray(res.x, dtype=float).reshape(b, nv)[:, :K]
 
 
+def pressed_feasible(contacts: Contacts, com: ArrayLike, length_scale: float, column: ArrayLike,
+                     force: ArrayLike) -> BoolArray:
+    """(B,) quasi-static support with one contact's normal force fixed (a pressed finger),
+    decided exactly by cone tests, without an LP.
+
+    Contact ``column[b]`` of instance ``b`` has its normal force fixed at ``force[b]`` (in
+    units of the weight); the other contacts keep their mode-dependent cones (closed:
+    margin 0). A SLIDING pressed contact's force is then known, ``w``, and the test is
+    ``e_y - w in cone{g}``. A STICKING one's is ``w(a) = (1 - a) w_- + a w_+``, ``a`` in
+    [0, 1], between its two cone edges scaled to that normal force: with ``d = w_+ - w_-``
+    the set of feasible ``a`` is an interval (the cone is convex), so it meets [0, 1]
+    exactly when ``e_y - w_- in cone{g, d}`` (some feasible ``a >= 0``) and
+    ``e_y - w_+ in cone{g, -d}`` (some feasible ``a <= 1``). The same decisions as
+    :func:`bounded_support` with ``pressed`` (a test compares them).
+    """
+    c, il = _check_contacts_frame(contacts, com, length_scale)
+    B, C = contacts.batch, contacts.count
+    col = np.broadcast_to(np.asarray(column, dtype=np.int64), (B,))
+    f = np.broadcast_to(np.asarray(force, dtype=float), (B,))
+    gens, pen = wrench_generators(contacts, c, 1.0 / il)  # (B, 2C, 3), unit force directions
+    rows = np.arange(B)
+    mu = contacts.mu[rows, col]
+    scale = (f * np.sqrt(1.0 + np.where(mu < MU_ZERO, 0.0, mu) ** 2))[:, None]
+    w_plus = gens[rows, 2 * col] * scale
+    w_minus = gens[rows, 2 * col + 1] * scale
+    others = gens.copy()
+    others[rows, 2 * col] = 0.0
+    others[rows, 2 * col + 1] = 0.0
+    sliding = contacts.modes[rows, col] == ContactMode.SLIDING
+    out = np.zeros(B, dtype=bool)
+    if sliding.any():
+        sl = np.flatnonzero(sliding)
+        out[sl] = cone_contains(others[sl], _EY[None, :] - w_plus[sl], 0.0)
+    st = np.flatnonzero(~sliding)
+    if st.size:
+        d = (w_plus - w_minus)[st]
+        a = cone_contains(np.concatenate([others[st], d[:, None, :]], axis=1), _EY[None, :] - w_minus[st], 0.0)
+        b = np.zeros(st.size, dtype=bool)
+        if a.any():
+            sa = st[a]
+            b[a] = cone_contains(np.concatenate([others[sa], -d[a][:, None, :]], axis=1),
+                                 _EY[None, :] - w_plus[sa], 0.0)
+        out[st] = a & b
+    return out & ~pen
+
+
 def _lp_phase1(G: FloatArray, A: FloatArray, ub: FloatArray, fixed: FloatArray | None = None) -> BoolArray | None:
     """(b,) which instances of a chunk of :func:`_lp_block` have a feasible point: one
     block-diagonal LP, always feasible, minimising per instance the slack its equalities
@@ -1420,6 +1466,7 @@ __all__: list[str] = [
     "ReferenceResult",
     "bounded_support",
     "classify_contacts",
+    "pressed_feasible",
     "cone_contains",
     "feasible_batch",
     "feasible_reference",

@@ -739,3 +739,30 @@ def test_bounded_support_holds_a_pressed_finger_at_its_force() -> None:
     # unpressed, the least finger force is the threshold itself
     free = bounded_support(drag, [50.0, 10.0], 50.0, W, [-1, -1, 0], None, margin=0.0)
     assert free.max_finger_force[0] == pytest.approx(0.03 * W / 0.57, rel=1e-6)
+
+
+def test_pressed_feasible_decides_as_the_pressed_lp() -> None:
+    """The cone-test decision of a pressed contact's support (two cone tests for a
+    sticking contact, one for a sliding one) against the force LP with that contact's
+    normal force fixed, on random instances."""
+    from geometry.mechanics import ContactMode, bounded_support, pressed_feasible
+
+    rng = np.random.default_rng(7)
+    B, C = 400, 4
+    ang = rng.uniform(0, 2 * np.pi, (B, C))
+    normals = np.stack([np.cos(ang), np.sin(ang)], axis=-1)
+    points = rng.uniform(-50, 50, (B, C, 2))
+    mu = rng.choice([0.0, 0.1, 0.3, 0.8], (B, C))
+    modes = rng.choice([ContactMode.STICKING, ContactMode.SLIDING, ContactMode.ABSENT], (B, C), p=[0.5, 0.3, 0.2])
+    modes[:, 0] = rng.choice([ContactMode.STICKING, ContactMode.SLIDING], B)
+    sdir = rng.normal(size=(B, C, 2))
+    contacts = Contacts.make(points, np.where((modes == ContactMode.ABSENT)[..., None], 0.0, normals), mu,
+                             modes, sdir)
+    force = rng.choice([0.2, 1.0, 3.0], B)
+    fast = pressed_feasible(contacts, [0.0, 0.0], 40.0, np.zeros(B, dtype=np.int64), force)
+    finger_of = np.full(C, -1)
+    finger_of[0] = 0
+    lp = bounded_support(contacts, [0.0, 0.0], 40.0, 1.0, finger_of, None, margin=0.0, fingers=1,
+                         pressed=force[:, None]).feasible
+    assert fast.any() and (~fast).any()
+    assert (fast == lp).all()
