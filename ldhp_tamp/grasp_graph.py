@@ -484,10 +484,11 @@ class GraspPlanner:
         same grasp set, e.g. :mod:`ldhp_tamp.baselines.contact_rrt`)."""
         self._prepare(np.asarray(start_pose, dtype=float))
 
-    def move_step(self, segment: Segment, g: int) -> Step:
+    def move_step(self, segment: Segment, g: int, press: float | None = None) -> Step:
         """The MoveObject plan step of ``segment`` carrying grasp ``g`` (as in the plans
-        :meth:`plan` makes)."""
-        return self._move_step(self.context, segment, g)
+        :meth:`plan` makes); ``press`` (N), when given, is the press the step asks for
+        (otherwise the one the segment's cached G_m holds for ``g``, if any)."""
+        return self._move_step(self.context, segment, g, press)
 
     def _prepare(self, start_pose: FloatArray) -> None:
         """Fix the grasp set for a path starting at ``start_pose`` (the start grasp's
@@ -1014,7 +1015,7 @@ class GraspPlanner:
         carried.append(node_path[-1][1])
         return steps, carried
 
-    def _move_step(self, ctx: AdjustContext, seg: Segment, g: int) -> Step:
+    def _move_step(self, ctx: AdjustContext, seg: Segment, g: int, press: float | None = None) -> Step:
         """The MoveObject step of ``seg`` carrying grasp ``g``: the segment's dense poses
         (refined where a finger would move more than the waypoint step), gripper T * g,
         the grasp's contacts in the world."""
@@ -1030,8 +1031,8 @@ class GraspPlanner:
             wps.append(Waypoint(obj, Pose(float(grip[j, 0]), float(grip[j, 1]), float(grip[j, 2])),
                                 float(gs.width[g]), fc))  # type: ignore[arg-type]
         params = dict(seg.parameters)
-        hit = self._motion_sets.get(_motion_key(seg))
-        force = None if hit is None else hit[0].press_of(g)
+        hit = self._motion_sets.get(_motion_key(seg)) if press is None else None
+        force = press if press is not None else (None if hit is None else hit[0].press_of(g))
         if force is not None:  # the executor presses the one finger first (G_m found it needs it)
             params[PRESS_KEY] = Press(int(np.argmax(touch)), force).as_dict()
         return Step(seg.primitive, Family.MOVE_OBJECT, params,

@@ -532,6 +532,7 @@ class _Search:
         grasp_rng, self.rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
         self.radius = float(world.object.polygon.radius)
         self.declared = frozenset(domain.names(Family.MOVE_OBJECT))
+        self._press: dict[tuple[int, int], float] = {}  # (id of a segment, grasp) -> the press G_m found
         k = options.samples_per_edge or settings.samples_per_edge
         offsets = tuple(float(u) for u in grasp_rng.uniform(*EDGE_OFFSET_RANGE, size=world.object.n))
         grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k, edge_offsets=offsets))
@@ -651,7 +652,7 @@ class _Search:
         would refuse."""
         t0 = budget.clock()
         plan = Plan(PLAN_FORMAT, self.scenario.name, self.scenario.sha256, PlanStatus.SOLVED,
-                    (self.planner.move_step(seg, g),), PlanStats(engine=ENGINE))
+                    (self.planner.move_step(seg, g, self._press.get((id(seg), g))),), PlanStats(engine=ENGINE))
         ok = forward_check(plan, self.scenario).ok
         self.stats.judge_time += budget.clock() - t0
         self.stats.ambiguous += not ok
@@ -676,6 +677,10 @@ class _Search:
             return cand
         mg = motion_conditioned(self.world, self.grasps, seg.poses, cand, self.motion_opts, rate=False)
         self.stats.feasibility_checks += mg.checks
+        for g in mg.indices:  # the presses G_m found (a one-finger drag): the step asks for them
+            force = mg.press_of(int(g))
+            if force is not None:
+                self._press[(id(seg), int(g))] = force
         return mg.indices
 
     def _sample(self, rows: IntArray) -> IntArray:
@@ -806,7 +811,8 @@ class _Search:
                 steps.append(self._change_step(ch))
                 owner.append(j)
             assert node.segment is not None
-            steps.append(self.planner.move_step(node.segment, node.grasp))
+            steps.append(self.planner.move_step(node.segment, node.grasp,
+                                                self._press.get((id(node.segment), node.grasp))))
             owner.append(j)
         for ch in end:
             steps.append(self._change_step(ch))
