@@ -693,10 +693,10 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
     ``lam = (c_jk, -c_ik, c_ij)``; the triple certifies iff lam has one sign and
     ``D = A_i c_jk - A_j c_ik + A_k c_ij`` (the 3x3 determinant) has the same sign.
 
-    The crosses are one (pairs, b) array in lexicographic order, so for a fixed (i, j) the
-    triples (i, j, k > j) need the rows (j, k) and (i, k) as two contiguous blocks and the
-    row (i, j): their determinants are three block operations (the same products and sums,
-    in the same order, as triple by triple).
+    The crosses are one (pairs, b) array in lexicographic order (:func:`_triples`). The
+    answer is the OR over the triples, so an instance accepted by a triple needs no other:
+    after the triples of the first generator (most certificates among them), the
+    instances still open are gathered and only they meet the other triples.
     """
     acc = np.zeros(b, dtype=bool)
     nz = np.not_equal(P, 0.0)
@@ -718,41 +718,75 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
             c -= T[:m]
         GE = np.greater_equal(C, -_CROSS_TOL)
         LE = np.less_equal(C, _CROSS_TOL)
-        D = np.empty((n - 2, b))
-        M1 = np.empty((n - 2, b), dtype=bool)
-        M2 = np.empty((n - 2, b), dtype=bool)
-        M3 = np.empty((n - 2, b), dtype=bool)
-        for i in range(n - 2):
-            for j in range(i + 1, n - 1):
-                m = n - 1 - j
-                jk = slice(off[j], off[j] + m)  # (j, k) for k = j+1 .. n-1
-                ik = slice(off[i] + j - i, off[i] + n - 1 - i)  # (i, k), same k
-                ij = off[i] + j - i - 1  # (i, j)
-                d, t = D[:m], T[:m]
-                np.multiply(A[i], C[jk], out=d)
-                np.multiply(A[j], C[ik], out=t)
-                d -= t
-                np.multiply(A[j + 1:], C[ij], out=t)
-                d += t
-                m1, m2, m3 = M1[:m], M2[:m], M3[:m]
-                np.logical_and(GE[jk], LE[ik], out=m1)
-                m1 &= GE[ij]
-                m1 &= np.greater(d, _DET_TOL, out=m3)
-                np.logical_and(LE[jk], GE[ik], out=m2)
-                m2 &= LE[ij]
-                m2 &= np.less(d, -_DET_TOL, out=m3)
-                m1 |= m2
-                acc |= m1.any(axis=0)
+        _triples(A, C, GE, LE, n, 0, 1, acc)
+        if n > 3:
+            todo = np.flatnonzero(~acc)
+            if todo.size > _COMPACT * b:  # too few accepted to pay for the gathers
+                _triples(A, C, GE, LE, n, 1, n - 2, acc)
+            elif todo.size:
+                tail = slice(off[1], None)  # the pairs (j, k), 1 <= j < k, of the triples left
+                sub = np.zeros(todo.size, dtype=bool)
+                _triples(np.take(A, todo, axis=1), np.take(C[tail], todo, axis=1), np.take(GE[tail], todo, axis=1),
+                         np.take(LE[tail], todo, axis=1), n, 1, n - 2, sub, off[1])
+                acc[todo] = sub
         # A one- or two-generator certificate needs a pair with |c_jk| <= |r| <= 3 tol
         # (|p| <= 1.5, |A| <= 1): only such instances go to the degenerate test.
-        rest = np.flatnonzero(~acc)
-        if rest.size:
-            rest = rest[(np.abs(C[:, rest]) <= 3.0 * _DEGENERATE_TOL).any(axis=0)]
+        np.abs(C, out=C)
+        small = np.less_equal(C, 3.0 * _DEGENERATE_TOL, out=GE).any(axis=0)
+        rest = np.flatnonzero(small & ~acc)
     else:
         rest = np.flatnonzero(~acc)
     if rest.size and n:
         acc[rest] = _contains_degenerate(P[:, rest], Q[:, rest], A[:, rest])
     return acc
+
+
+#: Gather the instances still open after the first generator's triples only when at
+#: most this fraction of the chunk is left (the gathers cost about as much as a sixth of
+#: the remaining triples).
+_COMPACT: float = 0.75
+
+
+def _triples(A: Rows, C: Rows, GE: BoolArray, LE: BoolArray, n: int, first: int, stop: int, acc: BoolArray,
+             base: int = 0) -> None:
+    """``acc |=`` the certificates of the triples (i, j, k), ``first <= i < stop``, of n
+    generators. Pair (j, k) is row ``off[j] + k - j - 1 - base`` of ``C`` (its crosses),
+    ``GE`` (``c >= -tol``) and ``LE`` (``c <= tol``), ``off`` from :func:`_pair_offsets`.
+
+    For a fixed (i, j) the triples (i, j, k > j) need the rows (j, k) and (i, k) as two
+    contiguous blocks and the row (i, j): their determinants are three block operations
+    with the same products and sums, in the same order, as triple by triple.
+    """
+    off = [o - base for o in _pair_offsets(n)]
+    b = acc.shape[0]
+    D = np.empty((n - 2, b))
+    T = np.empty((n - 2, b))
+    M1 = np.empty((n - 2, b), dtype=bool)
+    M2 = np.empty((n - 2, b), dtype=bool)
+    M3 = np.empty((n - 2, b), dtype=bool)
+    hit = np.zeros((n - 2, b), dtype=bool)
+    for i in range(first, stop):
+        for j in range(i + 1, n - 1):
+            m = n - 1 - j
+            jk = slice(off[j], off[j] + m)  # (j, k) for k = j+1 .. n-1
+            ik = slice(off[i] + j - i, off[i] + n - 1 - i)  # (i, k), same k
+            ij = off[i] + j - i - 1  # (i, j)
+            d, t = D[:m], T[:m]
+            np.multiply(A[i], C[jk], out=d)
+            np.multiply(A[j], C[ik], out=t)
+            d -= t
+            np.multiply(A[j + 1:], C[ij], out=t)
+            d += t
+            m1, m2, m3 = M1[:m], M2[:m], M3[:m]
+            np.logical_and(GE[jk], LE[ik], out=m1)
+            m1 &= GE[ij]
+            m1 &= np.greater(d, _DET_TOL, out=m3)
+            np.logical_and(LE[jk], GE[ik], out=m2)
+            m2 &= LE[ij]
+            m2 &= np.less(d, -_DET_TOL, out=m3)
+            m1 |= m2
+            hit[:m] |= m1
+    acc |= hit.any(axis=0)
 
 
 def _contains_degenerate(P: Rows, Q: Rows, A: Rows) -> BoolArray:
