@@ -525,12 +525,18 @@ def classify_contacts(
 
 Rows = FloatArray  # (K, b): one row per generator slot
 
+# the mode codes as numpy scalars: comparing an int8 array with an IntEnum member costs
+# 5 us more per call (the member goes through Python's int conversion)
+_STICKING, _ROLLING, _SLIDING, _PENETRATING = (np.int8(m) for m in (ContactMode.STICKING, ContactMode.ROLLING,
+                                                                   ContactMode.SLIDING, ContactMode.PENETRATING))
+Gens = FloatArray  # (3, K, b): the rows X, Y, Z of the generators
+
 
 def _generators_chunk(
     contacts: Contacts, sl: slice, com: FloatArray, inv_L: FloatArray, mu_override: FloatArray | None = None
-) -> tuple[Rows, Rows, Rows, BoolArray]:
-    """Generators of a chunk: ``X, Y, Z`` are (K, b) arrays (views of one (3, K, b)
-    block), row k = 2i or 2i+1 for contact i; plus the chunk's penetrating flags (b,).
+) -> tuple[Gens, BoolArray]:
+    """Generators of a chunk: a (3, K, b) array ``G`` of rows ``X, Y, Z = G``, row
+    k = 2i or 2i+1 for contact i; plus the chunk's penetrating flags (b,).
 
     All contacts at once, on (C, b) arrays: the two edges of a cone share their
     ``sqrt(1 + mu^2)``, its reciprocal and the products ``mu n`` (the edge ``n - mu t`` is
@@ -539,7 +545,7 @@ def _generators_chunk(
     """
     # (C, b) blocks, instances contiguous: one transposing copy per input
     modes = np.ascontiguousarray(contacts.modes[sl].T)
-    pen = (modes == ContactMode.PENETRATING).any(axis=0)
+    pen = (modes == _PENETRATING).any(axis=0)
     pts = np.ascontiguousarray(contacts.points[sl].transpose(2, 1, 0))
     nx, ny = np.ascontiguousarray(contacts.normals[sl].transpose(2, 1, 0))
     mus = np.ascontiguousarray((contacts.mu[sl] if mu_override is None else mu_override).T)
@@ -551,9 +557,9 @@ def _generators_chunk(
     rx *= il
     ry = pts[1] - cy
     ry *= il
-    full = modes == ContactMode.STICKING
-    full |= modes == ContactMode.ROLLING
-    sliding = modes == ContactMode.SLIDING
+    full = modes == _STICKING
+    full |= modes == _ROLLING
+    sliding = modes == _SLIDING
     C, b = modes.shape
     G = np.empty((3, C, 2, b))  # (x, y, z) x contact x edge x instance
     mny = mu * ny
@@ -589,8 +595,7 @@ def _generators_chunk(
         np.multiply(rx, Y, out=Z)
         np.multiply(ry, X, out=tmp)
         Z -= tmp
-    G = G.reshape(3, 2 * C, b)
-    return G[0], G[1], G[2], pen
+    return G.reshape(3, 2 * C, b), pen
 
 
 def _com_and_scale(com: ArrayLike, length_scale: float | ArrayLike, batch: int) -> tuple[FloatArray, FloatArray]:
@@ -626,7 +631,7 @@ def wrench_generators(contacts: Contacts, com: ArrayLike, length_scale: float | 
     penetrating : ndarray of bool, shape (B,)
     """
     c, il = _com_and_scale(com, length_scale, contacts.batch)
-    X, Y, Z, pen = _generators_chunk(contacts, slice(None), c, il)
+    (X, Y, Z), pen = _generators_chunk(contacts, slice(None), c, il)
     K, B = len(X), contacts.batch
     out = np.zeros((B, K, 3))
     for k in range(K):
@@ -699,11 +704,10 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
     instances still open are gathered and only they meet the other triples.
     """
     acc = np.zeros(b, dtype=bool)
-    nz = np.not_equal(P, 0.0)
-    nz |= np.not_equal(Q, 0.0)
-    nz |= np.not_equal(A, 0.0)
-    live = np.flatnonzero(nz.any(axis=1))
-    n = live.size
+    # the generator slots not zero in every instance (a first element decides most)
+    live = [k for k in range(P.shape[0])
+            if A[k, 0] != 0.0 or P[k, 0] != 0.0 or Q[k, 0] != 0.0 or A[k].any() or P[k].any() or Q[k].any()]
+    n = len(live)
     if n < P.shape[0]:
         P, Q, A = P[live], Q[live], A[live]
     if n >= 3:
@@ -731,9 +735,14 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
                 acc[todo] = sub
         # A one- or two-generator certificate needs a pair with |c_jk| <= |r| <= 3 tol
         # (|p| <= 1.5, |A| <= 1): only such instances go to the degenerate test.
-        np.abs(C, out=C)
-        small = np.less_equal(C, 3.0 * _DEGENERATE_TOL, out=GE).any(axis=0)
-        rest = np.flatnonzero(small & ~acc)
+        rest = np.flatnonzero(~acc)
+        if rest.size > b // 2:
+            np.abs(C, out=C)
+            small = np.less_equal(C, 3.0 * _DEGENERATE_TOL, out=GE).any(axis=0)
+            rest = np.flatnonzero(small & ~acc)
+        elif rest.size:
+            Cr = np.take(C, rest, axis=1)
+            rest = rest[(np.abs(Cr, out=Cr) <= 3.0 * _DEGENERATE_TOL).any(axis=0)]
     else:
         rest = np.flatnonzero(~acc)
     if rest.size and n:
@@ -810,22 +819,19 @@ def _contains_degenerate(P: Rows, Q: Rows, A: Rows) -> BoolArray:
     return acc
 
 
-def _contains(X: Rows, Y: Rows, Z: Rows, t: tuple[FloatArray, FloatArray, FloatArray]) -> BoolArray:
-    P, Q, A, zero = _reduce_to_ey(X, Y, Z, t)
+def _contains(G: Gens, t: FloatArray) -> BoolArray:
+    P, Q, A, zero = _reduce_to_ey(G[0], G[1], G[2], t)
     return _contains_reduced(P, Q, A, zero.shape[0]) | zero
 
 
-def _shifted_target(X: Rows, Y: Rows, Z: Rows, target: FloatArray, eps: FloatArray | float) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """``target - eps * sum_k g_k`` as three (b,) arrays; ``target`` is (3,) or (3, b).
-    The sums run over the rows in order, from zero."""
-    out = []
-    for rows, tc in zip((X, Y, Z), target):
-        s = np.zeros(rows.shape[1])
-        for r in rows:
-            s += r
-        s *= eps
-        out.append(np.subtract(tc, s, out=s))
-    return out[0], out[1], out[2]
+def _shifted_target(G: Gens, target: FloatArray, eps: FloatArray | float) -> FloatArray:
+    """``target - eps * sum_k g_k`` as a (3, b) array; ``target`` is (3,) or (3, b). The
+    sum runs over the generators in order, from zero."""
+    s = np.zeros((3, G.shape[2]))
+    for k in range(G.shape[1]):
+        s += G[:, k]
+    s *= eps
+    return np.subtract(np.reshape(target, (3, -1)), s, out=s)
 
 
 def cone_contains(generators: ArrayLike, target: ArrayLike, margin: float | ArrayLike = 0.0) -> BoolArray:
@@ -862,8 +868,8 @@ def cone_contains(generators: ArrayLike, target: ArrayLike, margin: float | Arra
     for s in range(0, B, _CHUNK):
         sl = slice(s, min(s + _CHUNK, B))
         b = sl.stop - sl.start
-        X, Y, Z = np.ascontiguousarray(g[sl].transpose(2, 1, 0)) if K else np.zeros((3, 1, b))
-        out[sl] = _contains(X, Y, Z, _shifted_target(X, Y, Z, tgt[sl].T, eps[sl]))
+        G = np.ascontiguousarray(g[sl].transpose(2, 1, 0)) if K else np.zeros((3, 1, b))
+        out[sl] = _contains(G, _shifted_target(G, tgt[sl].T, eps[sl]))
     return out
 
 
@@ -885,9 +891,9 @@ def _feasible_impl(
     for s in range(0, B, _CHUNK):
         sl = slice(s, min(s + _CHUNK, B))
         mu = None if mu_override is None else mu_override[sl]
-        X, Y, Z, pen = _generators_chunk(contacts, sl, com, inv_L, mu)
+        G, pen = _generators_chunk(contacts, sl, com, inv_L, mu)
         eps = margin[sl] if margin.shape[0] > 1 else margin[0]
-        out[sl] = _contains(X, Y, Z, _shifted_target(X, Y, Z, _EY, eps)) & ~pen
+        out[sl] = _contains(G, _shifted_target(G, _EY, eps)) & ~pen
     return out
 
 
@@ -950,14 +956,14 @@ def force_closure_batch(
     targets = np.concatenate([np.eye(3), -np.eye(3)])
     for s in range(0, B, _CHUNK):
         sl = slice(s, min(s + _CHUNK, B))
-        X, Y, Z, pen = _generators_chunk(contacts, sl, c, il)
+        G, pen = _generators_chunk(contacts, sl, c, il)
         ok = ~pen
         for e in targets:
             idx = np.flatnonzero(ok)
             if not idx.size:
                 break
-            Xi, Yi, Zi = X[:, idx], Y[:, idx], Z[:, idx]
-            ok[idx] = _contains(Xi, Yi, Zi, _shifted_target(Xi, Yi, Zi, e, margin))
+            Gi = np.take(G, idx, axis=2)
+            ok[idx] = _contains(Gi, _shifted_target(Gi, e, margin))
         out[sl] = ok
     return out
 
