@@ -209,6 +209,22 @@ def test_scaling_polygons_are_regular_and_load_as_scenarios(n: int) -> None:
         assert ours[table] == pick[table]
 
 
+def test_scaling_growth_fits_the_exponent_of_time_against_graph_size() -> None:
+    from ldhp_tamp.bench import BenchRow
+
+    scaling = _scaling_module()
+
+    def row(name: str, edges: int, t: float, status: BenchStatus = BenchStatus.SOLVED) -> BenchRow:
+        return BenchRow(name, "x.toml", "pyperplan", 0, 100, 4, status, "", t, time_total_s=t, time_grasp_graph_s=t / 2,
+                        grasp_graph_nodes=edges // 10, grasp_graph_edges=edges, feasibility_checks=edges)
+
+    rows = [row("linear", e, 1e-4 * e) for e in (1000, 2000, 8000)]
+    rows += [row("square", e, 1e-8 * e * e) for e in (1000, 4000)] + [row("square", 9000, 5.0, BenchStatus.FAILED)]
+    text = scaling.growth(rows)
+    assert "- linear: 3 solved runs, edges 1000-8000; time ~ edges^1.00 (grasp-graph tier ~ edges^1.00)" in text
+    assert "- square: 2 solved runs, edges 1000-4000; time ~ edges^2.00" in text  # the failed run left out
+
+
 def test_a_solve_that_fails_past_the_time_limit_counts_as_a_timeout() -> None:
     from ldhp_tamp.bench import _status
 
