@@ -187,6 +187,13 @@ def test_plots_against_k_are_written_as_png_and_svg(tmp_path: Path) -> None:
     assert plot_scaling(rows[:2], SAMPLES, tmp_path / "none") is None  # a single K: no figure
 
 
+def test_comparison_plot_of_ten_solved_runs_of_ten(tmp_path: Path) -> None:
+    """The Wilson interval of 10/10 rounds its upper end to 1 - 1e-16, below the rate:
+    the error bar's length is clipped at 0 (matplotlib refuses a negative one)."""
+    rows = [_row(10, s, BenchStatus.SOLVED, 0.5 + 0.01 * s, 100, 2) for s in range(10)]
+    assert [p.name for p in write_plots(rows, tmp_path, hard_limit_s=12.0)] == ["comparison.png", "comparison.svg"]
+
+
 def _scaling_module():
     spec = importlib.util.spec_from_file_location("scaling", REPO / "benchmarks" / "scaling.py")
     module = importlib.util.module_from_spec(spec)
