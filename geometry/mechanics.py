@@ -524,12 +524,12 @@ def classify_contacts(
 
 
 Rows = FloatArray  # (K, b): one row per generator slot
+Gens = FloatArray  # (3, K, b): the rows X, Y, Z of the generators
 
 # the mode codes as numpy scalars: comparing an int8 array with an IntEnum member costs
 # 5 us more per call (the member goes through Python's int conversion)
 _STICKING, _ROLLING, _SLIDING, _PENETRATING = (np.int8(m) for m in (ContactMode.STICKING, ContactMode.ROLLING,
                                                                    ContactMode.SLIDING, ContactMode.PENETRATING))
-Gens = FloatArray  # (3, K, b): the rows X, Y, Z of the generators
 
 
 def _generators_chunk(
@@ -655,8 +655,9 @@ def _pair_offsets(k: int) -> tuple[int, ...]:
     return tuple(off)
 
 
-def _reduce_to_ey(X: Rows, Y: Rows, Z: Rows, t: tuple[FloatArray, FloatArray, FloatArray]) -> tuple[Rows, Rows, Rows, BoolArray]:
-    """Map each instance linearly so that its target becomes a positive multiple of e_y.
+def _reduce_to_ey(X: Rows, Y: Rows, Z: Rows, t: FloatArray) -> tuple[Rows, Rows, Rows, BoolArray]:
+    """Map each instance linearly so that its target ``t`` (3, b) becomes a positive
+    multiple of e_y.
 
     Returns (K, b) arrays ``P, Q, A``: the generators' two components orthogonal (after
     the map) to the target and their component along it, and a (b,) mask of zero targets
