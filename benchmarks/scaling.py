@@ -9,15 +9,17 @@
    repeated with ``ldhp-tamp solve``.
 
 Each sweep is one :func:`ldhp_tamp.bench.run_bench` (worker processes, CSV, JSON,
-Markdown summary) followed by :func:`ldhp_tamp.bench_plots.write_plots`::
+Markdown summary) followed by :func:`ldhp_tamp.bench_plots.write_plots` and
+:func:`growth`, how the solve time grows with the grasp graph's size (``growth.md``)::
 
-    OUT/samples/   runs.csv runs.json summary.md time_vs_samples.png time_vs_samples.svg
-    OUT/vertices/  scenarios/polygon-NN.toml runs.csv ... time_vs_vertices.png .svg
+    OUT/samples/   runs.csv runs.json summary.md growth.md time_vs_samples.png time_vs_samples.svg
+    OUT/vertices/  scenarios/polygon-NN.toml runs.csv ... growth.md time_vs_vertices.png .svg
 
 Run::
 
     .venv/bin/python benchmarks/scaling.py --out bench-scaling --seeds 2 --jobs 2
     .venv/bin/python benchmarks/scaling.py --engines pyperplan,fast-downward --only vertices
+    .venv/bin/python benchmarks/scaling.py --task1 scenarios/task1_zero_mobility_lift_tilt70.toml --only samples
 
 Exit status 0 when the sweeps ran (whatever the solves' outcomes), 2 on bad input.
 """
@@ -107,7 +109,43 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--samples", default=",".join(map(str, SAMPLES)), help="K values of the K sweep")
     p.add_argument("--vertices", default=",".join(map(str, VERTICES)), help="vertex counts of the polygon sweep")
     p.add_argument("--only", choices=("samples", "vertices"), help="run one sweep only")
+    p.add_argument("--task1", default=str(TASK1), help="the task 1 scenario of the K sweep (default: as shipped)")
     return p.parse_args(argv)
+
+
+def _slope(xs: Sequence[float], ys: Sequence[float]) -> float:
+    """Least-squares slope of log y against log x (nan with fewer than two sizes)."""
+    lx, ly = [math.log(x) for x in xs], [math.log(y) for y in ys]
+    mx, my = sum(lx) / len(lx), sum(ly) / len(ly)
+    den = sum((x - mx) ** 2 for x in lx)
+    return math.nan if den == 0 else sum((x - mx) * (y - my) for x, y in zip(lx, ly)) / den
+
+
+def growth(rows: Sequence[Any]) -> str:
+    """How the solve time grows with the grasp graph: per scenario, the solved runs'
+    ``time_total_s`` and ``time_grasp_graph_s`` against ``grasp_graph_edges`` (and
+    nodes), and the exponent b of ``time ~ size^b`` fitted on a log-log scale (b <= 1:
+    no faster than linearly). A Markdown table and one line per scenario."""
+    lines = ["| scenario | K | vertices | seed | nodes | edges | feasibility checks | time (s) | grasp-graph tier (s) |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    fits = []
+    by: dict[str, list[Any]] = {}
+    for r in rows:
+        if r.status.value == "solved" and r.grasp_graph_edges and r.time_total_s:
+            by.setdefault(r.scenario if not r.scenario.startswith("polygon") else "polygons", []).append(r)
+    for name, rs in by.items():
+        rs.sort(key=lambda r: (r.grasp_graph_edges, r.seed))
+        for r in rs:
+            lines.append(f"| {r.scenario} | {r.samples_per_edge} | {r.object_vertices} | {r.seed} | "
+                         f"{r.grasp_graph_nodes} | {r.grasp_graph_edges} | {r.feasibility_checks} | "
+                         f"{r.time_total_s:.2f} | {r.time_grasp_graph_s:.2f} |")
+        edges = [float(r.grasp_graph_edges) for r in rs]
+        b_total = _slope(edges, [r.time_total_s for r in rs])
+        b_gg = _slope(edges, [max(r.time_grasp_graph_s, 1e-3) for r in rs])
+        b_nodes = _slope([float(r.grasp_graph_nodes) for r in rs], [r.time_total_s for r in rs])
+        fits.append(f"- {name}: {len(rs)} solved runs, edges {int(min(edges))}-{int(max(edges))}; "
+                    f"time ~ edges^{b_total:.2f} (grasp-graph tier ~ edges^{b_gg:.2f}), time ~ nodes^{b_nodes:.2f}")
+    return "\n".join(lines + [""] + fits) + "\n"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -124,8 +162,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.only != "vertices":
             options = BenchOptions(engines=engines, seeds=args.seeds, samples=ks,
                                    timeout_s=args.timeout, jobs=args.jobs)
-            rows, files = run_bench([PICK, TASK1], options, out / "samples", progress=say)
+            rows, files = run_bench([PICK, Path(args.task1)], options, out / "samples", progress=say)
             figures = write_plots(rows, out / "samples", options.hard_limit_s)
+            write_text_atomic(out / "samples" / "growth.md", growth(rows))
             say(f"K sweep: {files.summary}, " + ", ".join(map(str, figures)))
         if args.only != "samples":
             folder = out / "vertices" / "scenarios"
@@ -134,6 +173,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             options = BenchOptions(engines=engines, seeds=args.seeds, timeout_s=args.timeout, jobs=args.jobs)
             rows, files = run_bench(paths, options, out / "vertices", progress=say)
             figures = write_plots(rows, out / "vertices", options.hard_limit_s)
+            write_text_atomic(out / "vertices" / "growth.md", growth(rows))
             say(f"vertex sweep: {files.summary}, " + ", ".join(map(str, figures)))
     except (InputError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -523,54 +523,79 @@ def classify_contacts(
 # --------------------------------------------------------------------------------------
 
 
-Rows = list[FloatArray]
+Rows = FloatArray  # (K, b): one row per generator slot
+Gens = FloatArray  # (3, K, b): the rows X, Y, Z of the generators
+
+# the mode codes as numpy scalars: comparing an int8 array with an IntEnum member costs
+# 5 us more per call (the member goes through Python's int conversion)
+_STICKING, _ROLLING, _SLIDING, _PENETRATING = (np.int8(m) for m in (ContactMode.STICKING, ContactMode.ROLLING,
+                                                                   ContactMode.SLIDING, ContactMode.PENETRATING))
 
 
 def _generators_chunk(
     contacts: Contacts, sl: slice, com: FloatArray, inv_L: FloatArray, mu_override: FloatArray | None = None
-) -> tuple[Rows, Rows, Rows, BoolArray]:
-    """Generators of a chunk as rows: ``X[k], Y[k], Z[k]`` are (b,) arrays, slot k = 2i or
-    2i+1 of contact i; plus the chunk's penetrating flags (b,).
+) -> tuple[Gens, BoolArray]:
+    """Generators of a chunk: a (3, K, b) array ``G`` of rows ``X, Y, Z = G``, row
+    k = 2i or 2i+1 for contact i; plus the chunk's penetrating flags (b,).
 
-    Rows (not one (3, K, b) block) keep every allocation under the allocator's mmap
-    threshold, so repeated calls do not page-fault.
+    All contacts at once, on (C, b) arrays: the two edges of a cone share their
+    ``sqrt(1 + mu^2)``, its reciprocal and the products ``mu n`` (the edge ``n - mu t`` is
+    ``n + (-mu) t``; negating ``mu`` changes no rounding), so the values are bit for bit
+    those of the edge-by-edge formula ``(n + m t) / sqrt(1 + m^2)``.
     """
-    pts = contacts.points[sl]
-    nrm = contacts.normals[sl]
-    modes = contacts.modes[sl]
-    mus = contacts.mu[sl] if mu_override is None else mu_override
+    # (C, b) blocks, instances contiguous: one transposing copy per input
+    modes = np.ascontiguousarray(contacts.modes[sl].T)
+    pen = (modes == _PENETRATING).any(axis=0)
+    pts = np.ascontiguousarray(contacts.points[sl].transpose(2, 1, 0))
+    nx, ny = np.ascontiguousarray(contacts.normals[sl].transpose(2, 1, 0))
+    mus = np.ascontiguousarray((contacts.mu[sl] if mu_override is None else mu_override).T)
+    mu = np.where(mus < MU_ZERO, 0.0, mus)
     cx = com[sl, 0] if com.shape[0] > 1 else com[0, 0]
     cy = com[sl, 1] if com.shape[0] > 1 else com[0, 1]
     il = inv_L[sl] if inv_L.shape[0] > 1 else inv_L[0]
-    pen = (modes == ContactMode.PENETRATING).any(axis=1)
-    X: Rows = []
-    Y: Rows = []
-    Z: Rows = []
-    for i in range(contacts.count):
-        md = modes[:, i]
-        full = (md == ContactMode.STICKING) | (md == ContactMode.ROLLING)
-        sliding = md == ContactMode.SLIDING
-        nx = np.ascontiguousarray(nrm[:, i, 0])
-        ny = np.ascontiguousarray(nrm[:, i, 1])
-        rx = (pts[:, i, 0] - cx) * il
-        ry = (pts[:, i, 1] - cy) * il
-        mu = mus[:, i]
-        mu = np.where(mu < MU_ZERO, 0.0, mu)
-        # slot 2i: edge n + mA t (mA = mu, or -sign(s.t) mu when sliding); 2i+1: n - mu t
-        if sliding.any():
-            st = -contacts.slide_dirs[sl, i, 0] * ny + contacts.slide_dirs[sl, i, 1] * nx
-            mA = np.where(sliding, -np.sign(st) * mu, mu)
-            wA = full | sliding
-        else:
-            mA, wA = mu, full
-        for m, w in ((mA, wA), (-mu, full)):
-            inv = w / np.sqrt(1.0 + m * m)
-            dx = (nx - m * ny) * inv
-            dy = (ny + m * nx) * inv
-            X.append(dx)
-            Y.append(dy)
-            Z.append(rx * dy - ry * dx)
-    return X, Y, Z, pen
+    rx = pts[0] - cx
+    rx *= il
+    ry = pts[1] - cy
+    ry *= il
+    full = modes == _STICKING
+    full |= modes == _ROLLING
+    sliding = modes == _SLIDING
+    C, b = modes.shape
+    G = np.empty((3, C, 2, b))  # (x, y, z) x contact x edge x instance
+    mny = mu * ny
+    mnx = mu * nx
+    root = mu * mu
+    root += 1.0
+    np.sqrt(root, out=root)
+    inv = np.divide(full, root)
+    # edge 1: n - mu t, i.e. m = -mu: (nx + mu ny, ny - mu nx) / sqrt(1 + mu^2)
+    X1, Y1, Z1 = G[0, :, 1], G[1, :, 1], G[2, :, 1]
+    np.add(nx, mny, out=X1)
+    X1 *= inv
+    np.subtract(ny, mnx, out=Y1)
+    Y1 *= inv
+    # edge 0: n + mA t, mA = mu, or -sign(s.t) mu when sliding (the edge opposing sliding)
+    X0, Y0, Z0 = G[0, :, 0], G[1, :, 0], G[2, :, 0]
+    if sliding.any():
+        sdx, sdy = np.ascontiguousarray(contacts.slide_dirs[sl].transpose(2, 1, 0))
+        st = -sdx * ny + sdy * nx
+        mA = np.where(sliding, -np.sign(st) * mu, mu)
+        invA = (full | sliding) / np.sqrt(1.0 + mA * mA)
+        np.subtract(nx, mA * ny, out=X0)
+        X0 *= invA
+        np.add(ny, mA * nx, out=Y0)
+        Y0 *= invA
+    else:
+        np.subtract(nx, mny, out=X0)
+        X0 *= inv
+        np.add(ny, mnx, out=Y0)
+        Y0 *= inv
+    tmp = np.empty((C, b))
+    for X, Y, Z in ((X0, Y0, Z0), (X1, Y1, Z1)):
+        np.multiply(rx, Y, out=Z)
+        np.multiply(ry, X, out=tmp)
+        Z -= tmp
+    return G.reshape(3, 2 * C, b), pen
 
 
 def _com_and_scale(com: ArrayLike, length_scale: float | ArrayLike, batch: int) -> tuple[FloatArray, FloatArray]:
@@ -606,7 +631,7 @@ def wrench_generators(contacts: Contacts, com: ArrayLike, length_scale: float | 
     penetrating : ndarray of bool, shape (B,)
     """
     c, il = _com_and_scale(com, length_scale, contacts.batch)
-    X, Y, Z, pen = _generators_chunk(contacts, slice(None), c, il)
+    (X, Y, Z), pen = _generators_chunk(contacts, slice(None), c, il)
     K, B = len(X), contacts.batch
     out = np.zeros((B, K, 3))
     for k in range(K):
@@ -620,20 +645,24 @@ def wrench_generators(contacts: Contacts, com: ArrayLike, length_scale: float | 
 
 
 @functools.lru_cache(maxsize=None)
-def _index_tables(k: int) -> tuple[tuple[tuple[int, int], ...], tuple[tuple[int, int, int, int, int, int], ...]]:
-    """Pairs (j, k) and triples (i, j, k, idx(jk), idx(ik), idx(ij)) of k slots."""
-    pairs = tuple(itertools.combinations(range(k), 2))
-    pid = {p: n for n, p in enumerate(pairs)}
-    triples = tuple((i, j, m, pid[(j, m)], pid[(i, m)], pid[(i, j)]) for i, j, m in itertools.combinations(range(k), 3))
-    return pairs, triples
+def _pair_offsets(k: int) -> tuple[int, ...]:
+    """Row of pair (j, j+1) in the lexicographic list of the pairs (j, m), j < m < k: the
+    pairs (j, j+1 .. k-1) are the rows ``off[j] .. off[j] + k-2-j``."""
+    off, n = [], 0
+    for j in range(k):
+        off.append(n)
+        n += k - 1 - j
+    return tuple(off)
 
 
-def _reduce_to_ey(X: Rows, Y: Rows, Z: Rows, t: tuple[FloatArray, FloatArray, FloatArray]) -> tuple[Rows, Rows, Rows, BoolArray]:
-    """Map each instance linearly so that its target becomes a positive multiple of e_y.
+def _reduce_to_ey(X: Rows, Y: Rows, Z: Rows, t: FloatArray) -> tuple[Rows, Rows, Rows, BoolArray]:
+    """Map each instance linearly so that its target ``t`` (3, b) becomes a positive
+    multiple of e_y.
 
-    Returns rows ``P, Q, A``: the generators' two components orthogonal (after the map)
-    to the target and their component along it, and a (b,) mask of zero targets (which
-    are trivially in the cone). Cone membership is invariant under invertible linear maps.
+    Returns (K, b) arrays ``P, Q, A``: the generators' two components orthogonal (after
+    the map) to the target and their component along it, and a (b,) mask of zero targets
+    (which are trivially in the cone). Cone membership is invariant under invertible
+    linear maps.
     """
     tx, ty, tz = t
     ax, ay, az = np.abs(tx), np.abs(ty), np.abs(tz)
@@ -649,14 +678,16 @@ def _reduce_to_ey(X: Rows, Y: Rows, Z: Rows, t: tuple[FloatArray, FloatArray, Fl
         def perm(x: FloatArray, y: FloatArray, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
             return np.where(kx, y, x), np.where(kx, x, np.where(kz, z, y)) * sgn, np.where(kz, y, z)
 
-        X, Y, Z = (list(r) for r in zip(*(perm(x, y, z) for x, y, z in zip(X, Y, Z)))) if X else ([], [], [])
+        X, Y, Z = perm(X, Y, Z)
         u, v, w = perm(tx, ty, tz)
         v = np.where(zero, 1.0, v)
     # shear (x, y, z) -> (x - (u/v) y, y, z - (w/v) y): maps (u, v, w) to (0, v, 0), v > 0
     a, c = u / v, w / v
-    P = [x - a * y for x, y in zip(X, Y)]
-    Q = [z - c * y for z, y in zip(Z, Y)]
-    return P, Q, list(Y), zero
+    P = a * Y
+    np.subtract(X, P, out=P)
+    Q = c * Y
+    np.subtract(Z, Q, out=Q)
+    return P, Q, Y, zero
 
 
 def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
@@ -667,52 +698,105 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
     2-D crosses ``c_jk = P_j Q_k - Q_j P_k`` give the unique zero combination
     ``lam = (c_jk, -c_ik, c_ij)``; the triple certifies iff lam has one sign and
     ``D = A_i c_jk - A_j c_ik + A_k c_ij`` (the 3x3 determinant) has the same sign.
+
+    The crosses are one (pairs, b) array in lexicographic order (:func:`_triples`). The
+    answer is the OR over the triples, so an instance accepted by a triple needs no other:
+    after the triples of the first generator (most certificates among them), the
+    instances still open are gathered and only they meet the other triples.
     """
     acc = np.zeros(b, dtype=bool)
-    live = [k for k in range(len(P)) if P[k].any() or Q[k].any() or A[k].any()]
-    P, Q, A = [P[k] for k in live], [Q[k] for k in live], [A[k] for k in live]
-    if len(live) >= 3:
-        pairs, triples = _index_tables(len(live))
-        tmp = np.empty(b)
+    # the generator slots not zero in every instance (a first element decides most)
+    live = [k for k in range(P.shape[0])
+            if A[k, 0] != 0.0 or P[k, 0] != 0.0 or Q[k, 0] != 0.0 or A[k].any() or P[k].any() or Q[k].any()]
+    n = len(live)
+    if n < P.shape[0]:
+        P, Q, A = P[live], Q[live], A[live]
+    if n >= 3:
+        off = _pair_offsets(n)
+        C = np.empty((off[n - 1], b))
+        T = np.empty((n - 1, b))
+        for j in range(n - 1):
+            m = n - 1 - j
+            c = C[off[j]:off[j] + m]
+            np.multiply(P[j], Q[j + 1:], out=c)
+            np.multiply(Q[j], P[j + 1:], out=T[:m])
+            c -= T[:m]
+        GE = np.greater_equal(C, -_CROSS_TOL)
+        LE = np.less_equal(C, _CROSS_TOL)
+        _triples(A, C, GE, LE, n, 0, 1, acc)
+        if n > 3:
+            todo = np.flatnonzero(~acc)
+            if todo.size > _COMPACT * b:  # too few accepted to pay for the gathers
+                _triples(A, C, GE, LE, n, 1, n - 2, acc)
+            elif todo.size:
+                tail = slice(off[1], None)  # the pairs (j, k), 1 <= j < k, of the triples left
+                sub = np.zeros(todo.size, dtype=bool)
+                _triples(np.take(A, todo, axis=1), np.take(C[tail], todo, axis=1), np.take(GE[tail], todo, axis=1),
+                         np.take(LE[tail], todo, axis=1), n, 1, n - 2, sub, off[1])
+                acc[todo] = sub
         # A one- or two-generator certificate needs a pair with |c_jk| <= |r| <= 3 tol
         # (|p| <= 1.5, |A| <= 1): only such instances go to the degenerate test.
-        maybe = np.zeros(b, dtype=bool)
-        small = np.empty(b, dtype=bool)
-        C: Rows = []
-        GE: list[BoolArray] = []
-        LE: list[BoolArray] = []
-        for j, k in pairs:
-            c = P[j] * Q[k]
-            np.multiply(Q[j], P[k], out=tmp)
-            c -= tmp
-            C.append(c)
-            GE.append(c >= -_CROSS_TOL)
-            LE.append(c <= _CROSS_TOL)
-            np.abs(c, out=tmp)
-            maybe |= np.less_equal(tmp, 3.0 * _DEGENERATE_TOL, out=small)
-        D = np.empty(b)
-        m1 = np.empty(b, dtype=bool)
-        m2 = np.empty(b, dtype=bool)
-        for i, j, k, jk, ik, ij in triples:
-            np.multiply(A[i], C[jk], out=D)
-            np.multiply(A[j], C[ik], out=tmp)
-            D -= tmp
-            np.multiply(A[k], C[ij], out=tmp)
-            D += tmp
-            np.logical_and(GE[jk], LE[ik], out=m1)
-            m1 &= GE[ij]
-            m1 &= np.greater(D, _DET_TOL, out=m2)
-            acc |= m1
-            np.logical_and(LE[jk], GE[ik], out=m1)
-            m1 &= LE[ij]
-            m1 &= np.less(D, -_DET_TOL, out=m2)
-            acc |= m1
-        rest = np.flatnonzero(maybe & ~acc)
+        rest = np.flatnonzero(~acc)
+        if rest.size > b // 2:
+            np.abs(C, out=C)
+            small = np.less_equal(C, 3.0 * _DEGENERATE_TOL, out=GE).any(axis=0)
+            rest = np.flatnonzero(small & ~acc)
+        elif rest.size:
+            Cr = np.take(C, rest, axis=1)
+            rest = rest[(np.abs(Cr, out=Cr) <= 3.0 * _DEGENERATE_TOL).any(axis=0)]
     else:
         rest = np.flatnonzero(~acc)
-    if rest.size and live:
-        acc[rest] = _contains_degenerate([p[rest] for p in P], [q[rest] for q in Q], [a[rest] for a in A])
+    if rest.size and n:
+        acc[rest] = _contains_degenerate(P[:, rest], Q[:, rest], A[:, rest])
     return acc
+
+
+#: Gather the instances still open after the first generator's triples only when at
+#: most this fraction of the chunk is left (the gathers cost about as much as a sixth of
+#: the remaining triples).
+_COMPACT: float = 0.75
+
+
+def _triples(A: Rows, C: Rows, GE: BoolArray, LE: BoolArray, n: int, first: int, stop: int, acc: BoolArray,
+             base: int = 0) -> None:
+    """``acc |=`` the certificates of the triples (i, j, k), ``first <= i < stop``, of n
+    generators. Pair (j, k) is row ``off[j] + k - j - 1 - base`` of ``C`` (its crosses),
+    ``GE`` (``c >= -tol``) and ``LE`` (``c <= tol``), ``off`` from :func:`_pair_offsets`.
+
+    For a fixed (i, j) the triples (i, j, k > j) need the rows (j, k) and (i, k) as two
+    contiguous blocks and the row (i, j): their determinants are three block operations
+    with the same products and sums, in the same order, as triple by triple.
+    """
+    off = [o - base for o in _pair_offsets(n)]
+    b = acc.shape[0]
+    D = np.empty((n - 2, b))
+    T = np.empty((n - 2, b))
+    M1 = np.empty((n - 2, b), dtype=bool)
+    M2 = np.empty((n - 2, b), dtype=bool)
+    M3 = np.empty((n - 2, b), dtype=bool)
+    hit = np.zeros((n - 2, b), dtype=bool)
+    for i in range(first, stop):
+        for j in range(i + 1, n - 1):
+            m = n - 1 - j
+            jk = slice(off[j], off[j] + m)  # (j, k) for k = j+1 .. n-1
+            ik = slice(off[i] + j - i, off[i] + n - 1 - i)  # (i, k), same k
+            ij = off[i] + j - i - 1  # (i, j)
+            d, t = D[:m], T[:m]
+            np.multiply(A[i], C[jk], out=d)
+            np.multiply(A[j], C[ik], out=t)
+            d -= t
+            np.multiply(A[j + 1:], C[ij], out=t)
+            d += t
+            m1, m2, m3 = M1[:m], M2[:m], M3[:m]
+            np.logical_and(GE[jk], LE[ik], out=m1)
+            m1 &= GE[ij]
+            m1 &= np.greater(d, _DET_TOL, out=m3)
+            np.logical_and(LE[jk], GE[ik], out=m2)
+            m2 &= LE[ij]
+            m2 &= np.less(d, -_DET_TOL, out=m3)
+            m1 |= m2
+            hit[:m] |= m1
+    acc |= hit.any(axis=0)
 
 
 def _contains_degenerate(P: Rows, Q: Rows, A: Rows) -> BoolArray:
@@ -736,20 +820,19 @@ def _contains_degenerate(P: Rows, Q: Rows, A: Rows) -> BoolArray:
     return acc
 
 
-def _contains(X: Rows, Y: Rows, Z: Rows, t: tuple[FloatArray, FloatArray, FloatArray]) -> BoolArray:
-    P, Q, A, zero = _reduce_to_ey(X, Y, Z, t)
+def _contains(G: Gens, t: FloatArray) -> BoolArray:
+    P, Q, A, zero = _reduce_to_ey(G[0], G[1], G[2], t)
     return _contains_reduced(P, Q, A, zero.shape[0]) | zero
 
 
-def _shifted_target(X: Rows, Y: Rows, Z: Rows, target: FloatArray, eps: FloatArray | float) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """``target - eps * sum_k g_k`` as three (b,) arrays; ``target`` is (3,) or (3, b)."""
-    out = []
-    for rows, tc in zip((X, Y, Z), target):
-        s = np.zeros_like(X[0]) if rows else np.zeros(1)
-        for r in rows:
-            s += r
-        out.append(tc - eps * s)
-    return out[0], out[1], out[2]
+def _shifted_target(G: Gens, target: FloatArray, eps: FloatArray | float) -> FloatArray:
+    """``target - eps * sum_k g_k`` as a (3, b) array; ``target`` is (3,) or (3, b). The
+    sum runs over the generators in order, from zero."""
+    s = np.zeros((3, G.shape[2]))
+    for k in range(G.shape[1]):
+        s += G[:, k]
+    s *= eps
+    return np.subtract(np.reshape(target, (3, -1)), s, out=s)
 
 
 def cone_contains(generators: ArrayLike, target: ArrayLike, margin: float | ArrayLike = 0.0) -> BoolArray:
@@ -785,11 +868,9 @@ def cone_contains(generators: ArrayLike, target: ArrayLike, margin: float | Arra
     out = np.empty(B, dtype=bool)
     for s in range(0, B, _CHUNK):
         sl = slice(s, min(s + _CHUNK, B))
-        X, Y, Z = ([np.ascontiguousarray(g[sl, k, c]) for k in range(K)] for c in range(3))
         b = sl.stop - sl.start
-        if K == 0:
-            X, Y, Z = [np.zeros(b)], [np.zeros(b)], [np.zeros(b)]
-        out[sl] = _contains(X, Y, Z, _shifted_target(X, Y, Z, tgt[sl].T, eps[sl]))
+        G = np.ascontiguousarray(g[sl].transpose(2, 1, 0)) if K else np.zeros((3, 1, b))
+        out[sl] = _contains(G, _shifted_target(G, tgt[sl].T, eps[sl]))
     return out
 
 
@@ -811,9 +892,9 @@ def _feasible_impl(
     for s in range(0, B, _CHUNK):
         sl = slice(s, min(s + _CHUNK, B))
         mu = None if mu_override is None else mu_override[sl]
-        X, Y, Z, pen = _generators_chunk(contacts, sl, com, inv_L, mu)
+        G, pen = _generators_chunk(contacts, sl, com, inv_L, mu)
         eps = margin[sl] if margin.shape[0] > 1 else margin[0]
-        out[sl] = _contains(X, Y, Z, _shifted_target(X, Y, Z, _EY, eps)) & ~pen
+        out[sl] = _contains(G, _shifted_target(G, _EY, eps)) & ~pen
     return out
 
 
@@ -876,14 +957,14 @@ def force_closure_batch(
     targets = np.concatenate([np.eye(3), -np.eye(3)])
     for s in range(0, B, _CHUNK):
         sl = slice(s, min(s + _CHUNK, B))
-        X, Y, Z, pen = _generators_chunk(contacts, sl, c, il)
+        G, pen = _generators_chunk(contacts, sl, c, il)
         ok = ~pen
         for e in targets:
             idx = np.flatnonzero(ok)
             if not idx.size:
                 break
-            Xi, Yi, Zi = ([r[idx] for r in rows] for rows in (X, Y, Z))
-            ok[idx] = _contains(Xi, Yi, Zi, _shifted_target(Xi, Yi, Zi, e, margin))
+            Gi = np.take(G, idx, axis=2)
+            ok[idx] = _contains(Gi, _shifted_target(Gi, e, margin))
         out[sl] = ok
     return out
 

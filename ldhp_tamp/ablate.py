@@ -471,7 +471,7 @@ def _failed_cell(job: _Job, failure: CellFailure, reason: str, wall_s: float) ->
 #: measured around the solve in its process (the process's start-up, which differs between
 #: executors, is not counted).
 _TASK: CellTask[_Job, AblationCell] = CellTask(run=_solve_job, failed=_failed_cell,
-                                               preload=("ldhp_tamp.ablate", "ldhp_tamp.tamp"), name="ablate")
+                                               preload=("ldhp_tamp.ablate", "ldhp_tamp.solver_preload"), name="ablate")
 
 
 def _solve(job: _Job, start: float) -> AblationCell:

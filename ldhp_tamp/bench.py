@@ -391,7 +391,7 @@ def _with_wall(row: BenchRow, wall_s: float) -> BenchRow:
 
 #: A bench run for :func:`ldhp_tamp.sweep.run_cells`: :func:`solve_run` in a process of its own.
 _TASK: CellTask[RunSpec, BenchRow] = CellTask(run=solve_run, failed=_failed_row, with_wall=_with_wall,
-                                              preload=("ldhp_tamp.bench", "ldhp_tamp.tamp"), name="bench")
+                                              preload=("ldhp_tamp.bench", "ldhp_tamp.solver_preload"), name="bench")
 
 
 def run_all(specs: Sequence[RunSpec], options: BenchOptions,

@@ -202,8 +202,8 @@ def plot_comparison(rows: Sequence[BenchRow], out_dir: str | os.PathLike[str],
             p = len(ok) / len(rs)
             xs.append(x)
             rate.append(100 * p)
-            err_lo.append(100 * (p - lo))
-            err_hi.append(100 * (hi - p))
+            err_lo.append(100 * max(0.0, p - lo))  # 2 of 2: hi rounds to 1 - 1e-16
+            err_hi.append(100 * max(0.0, hi - p))
             q = quartiles([r.time_total_s for r in ok if r.time_total_s is not None])
             if q is not None:
                 tx.append(x)

@@ -693,6 +693,25 @@ def _air_holders(ctx: PlanningContext, theta: float) -> np.ndarray:
     return ctx.memo[key]
 
 
+def _air_holders_of_goal(ctx: PlanningContext, theta: float) -> np.ndarray:
+    """``_air_holders(ctx, theta)`` among ``_air_holders(ctx, ctx.goal.theta)``: the
+    grasps that hold the object in the air at both orientations. Each grasp is decided on
+    its own, so only the goal's holders (a few hundred of thousands of grasps) are tested
+    at ``theta``, once per orientation in a solve (``ctx.memo``)."""
+    assert ctx.grasps is not None
+    key = ("air-holders-of-goal", round(float(wrap_angle(theta)), 9))
+    if key not in ctx.memo:
+        full = ctx.memo.get(("air-holders", key[1]))
+        goal = _air_holders(ctx, ctx.goal.theta)
+        if full is not None:
+            ctx.memo[key] = np.intersect1d(full, goal)
+        else:
+            w = ctx.workspace
+            high = np.array([[0.5 * (w.xmin + w.xmax), w.ymax + 10.0 * ctx.reach, theta]])
+            ctx.memo[key] = motion_conditioned(ctx.world, ctx.grasps, high, goal, rate=False).indices
+    return ctx.memo[key]
+
+
 def _lift_witnesses(ctx: PlanningContext, state: ContactState) -> list[Pose]:
     """The poses a lift out of ``state`` is looked for at: its witness poses for the
     transitions, then every other witness of its enumeration (a block on its corner has
@@ -740,9 +759,10 @@ def carriers(ctx: PlanningContext, pose: Pose, *, first: bool = False) -> np.nda
     Without a grasp set in the context: ``None``."""
     if ctx.grasps is None:
         return None
-    held = _air_holders(ctx, pose.theta)
-    if held.size and not _same_orientation(ctx, pose, ctx.goal):
-        held = np.intersect1d(held, _air_holders(ctx, ctx.goal.theta))  # held at both ends
+    if _same_orientation(ctx, pose, ctx.goal):
+        held = _air_holders(ctx, pose.theta)
+    else:
+        held = _air_holders_of_goal(ctx, pose.theta)  # held at both ends
     if held.size:
         grip = ctx.grasps.world_gripper(pose.as_array(), held)
         held = held[~gripper_env_overlap(ctx.world, grip, ctx.grasps.width[held])]

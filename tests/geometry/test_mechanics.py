@@ -371,6 +371,114 @@ def test_reference_forces_balance_the_weight(agreement):
 
 
 # --------------------------------------------------------------------------------------
+# The fast path against its definition, triple by triple
+# --------------------------------------------------------------------------------------
+
+
+def _decide_one(g: np.ndarray, target: np.ndarray, eps: float) -> bool:
+    """``target - eps * sum g in cone{g}`` by the fast path's rule, written out for one
+    instance with Python floats (each operation rounded as numpy rounds it): the target
+    mapped to a positive multiple of e_y, then every triple's certificate, then the one-
+    and two-generator certificates of the instances with a near-zero cross."""
+    s = [0.0, 0.0, 0.0]
+    for row in g:
+        for c in range(3):
+            s[c] += float(row[c])
+    t = [float(target[c]) - eps * s[c] for c in range(3)]
+    ax, ay, az = (abs(x) for x in t)
+    if max(ax, ay, az) == 0.0:
+        return True
+    rows = [tuple(float(x) for x in row) for row in g]
+    if not (t[1] > 0 and ay >= ax and ay >= az):  # largest |component| to the middle, positive
+        kx = ax >= ay and ax >= az
+        kz = not kx and az > ay
+        k = 0 if kx else 2 if kz else 1
+        sgn = math.copysign(1.0, t[k]) if t[k] != 0 else 0.0
+
+        def perm(x: float, y: float, z: float) -> tuple[float, float, float]:
+            return (y if kx else x), (x if kx else z if kz else y) * sgn, (y if kz else z)
+
+        rows = [perm(*r) for r in rows]
+        t = list(perm(*t))
+    u, v, w = t
+    a, c = u / v, w / v
+    P = [x - a * y for x, y, _ in rows]
+    Q = [z - c * y for _, y, z in rows]
+    A = [y for _, y, _ in rows]
+    live = [k for k in range(len(rows)) if P[k] != 0.0 or Q[k] != 0.0 or A[k] != 0.0]
+    P, Q, A = [P[k] for k in live], [Q[k] for k in live], [A[k] for k in live]
+    n = len(live)
+    cross = {(j, k): P[j] * Q[k] - Q[j] * P[k] for j in range(n) for k in range(j + 1, n)}
+    tol, det = mech._CROSS_TOL, mech._DET_TOL
+    for i in range(n):
+        for j in range(i + 1, n):
+            for k in range(j + 1, n):
+                cjk, cik, cij = cross[j, k], cross[i, k], cross[i, j]
+                d = A[i] * cjk - A[j] * cik + A[k] * cij
+                if (cjk >= -tol and cik <= tol and cij >= -tol and d > det) or \
+                        (cjk <= tol and cik >= -tol and cij <= tol and d < -det):
+                    return True
+    if n >= 3 and not any(abs(x) <= 3.0 * mech._DEGENERATE_TOL for x in cross.values()):
+        return False
+    tol2 = mech._DEGENERATE_TOL * mech._DEGENERATE_TOL
+    norm2 = [p * p + q * q for p, q in zip(P, Q)]
+    if any(a > 0 and n2 <= tol2 * a * a for n2, a in zip(norm2, A)):
+        return True
+    nrm = [math.sqrt(x) for x in norm2]
+    for j in range(n):
+        for k in range(j + 1, n):
+            rx = nrm[k] * P[j] + nrm[j] * P[k]
+            ry = nrm[k] * Q[j] + nrm[j] * Q[k]
+            h = nrm[k] * A[j] + nrm[j] * A[k]
+            if h > 0 and rx * rx + ry * ry <= tol2 * h * h:
+                return True
+    return False
+
+
+def degenerate_instances(rng: np.random.Generator, n: int, count: int):
+    """Instances rich in the fast path's special cases: normals and points snapped to a
+    grid (parallel normals, contacts in line with the COM), frictionless and tiny
+    coefficients, every mode, sliding with no tangential speed, per-instance COMs."""
+    ang = rng.uniform(0, 2 * np.pi, (n, count))
+    rad = rng.uniform(0.0, 50.0, (n, count))
+    pts = np.stack([rad * np.cos(ang), rad * np.sin(ang)], -1)
+    pts = np.where(rng.random((n, count, 1)) < 0.3, np.round(pts / 10.0) * 10.0, pts)
+    phi = ang + np.pi + rng.uniform(-1.2, 1.2, (n, count))
+    phi = np.where(rng.random((n, count)) < 0.4, np.round(phi / (np.pi / 2)) * (np.pi / 2), phi)
+    nrm = np.stack([np.cos(phi), np.sin(phi)], -1)
+    nrm = np.where(np.abs(nrm) < 1e-12, 0.0, nrm)
+    nrm /= np.hypot(nrm[..., 0], nrm[..., 1])[..., None]
+    mu = np.where(rng.random((n, count)) < 0.5, rng.choice([0.0, 1e-9, 0.2, 1.0], (n, count)),
+                  rng.uniform(0.0, 1.0, (n, count)))
+    modes = rng.choice([ABS, S, R, SL, SEP, PEN], (n, count), p=[0.1, 0.4, 0.15, 0.25, 0.08, 0.02])
+    slide = rng.choice([-1.0, 0.0, 1.0], (n, count, 2))
+    com = np.where(rng.random((n, 1)) < 0.5, 0.0, rng.uniform(-20.0, 20.0, (n, 2)))
+    return Contacts.make(pts, nrm, mu, modes, slide), com, 50.0
+
+
+@pytest.mark.parametrize("count", [1, 2, 3, 4, 6])
+def test_fast_path_decides_as_its_triple_by_triple_definition(count: int):
+    """The vectorised kernel (blocks of triples, the instances accepted early left out of
+    the later triples, the degenerate test on the few left) decides every instance as the
+    certificate rule written out one instance and one triple at a time."""
+    rng = np.random.default_rng(1000 + count)
+    n = 1500 if count < 6 else 400
+    c, com, L = degenerate_instances(rng, n, count)
+    margin = np.where(rng.random(n) < 0.5, FEASIBILITY_MARGIN, rng.uniform(-0.05, 0.2, n))
+    fast = feasible_batch(c, com, L, margin)
+    gens, pen = wrench_generators(c, com, L)
+    slow = np.array([not pen[i] and _decide_one(gens[i], np.array([0.0, 1.0, 0.0]), float(margin[i]))
+                     for i in range(n)])
+    assert (fast == slow).all(), np.flatnonzero(fast != slow)[:10]
+    assert fast.any() and not fast.all()  # both outcomes
+    t = rng.normal(size=(n, 3)) * (rng.random((n, 3)) < 0.7)
+    g = np.where(rng.random(gens.shape[:2] + (1,)) < 0.2, 0.0, gens)
+    fast = cone_contains(g, t, 1e-7)
+    slow = np.array([_decide_one(g[i], t[i], 1e-7) for i in range(n)])
+    assert (fast == slow).all(), np.flatnonzero(fast != slow)[:10]
+
+
+# --------------------------------------------------------------------------------------
 # Properties
 # --------------------------------------------------------------------------------------
 

@@ -187,6 +187,13 @@ def test_plots_against_k_are_written_as_png_and_svg(tmp_path: Path) -> None:
     assert plot_scaling(rows[:2], SAMPLES, tmp_path / "none") is None  # a single K: no figure
 
 
+def test_comparison_plot_of_ten_solved_runs_of_ten(tmp_path: Path) -> None:
+    """The Wilson interval of 10/10 rounds its upper end to 1 - 1e-16, below the rate:
+    the error bar's length is clipped at 0 (matplotlib refuses a negative one)."""
+    rows = [_row(10, s, BenchStatus.SOLVED, 0.5 + 0.01 * s, 100, 2) for s in range(10)]
+    assert [p.name for p in write_plots(rows, tmp_path, hard_limit_s=12.0)] == ["comparison.png", "comparison.svg"]
+
+
 def _scaling_module():
     spec = importlib.util.spec_from_file_location("scaling", REPO / "benchmarks" / "scaling.py")
     module = importlib.util.module_from_spec(spec)
@@ -207,6 +214,22 @@ def test_scaling_polygons_are_regular_and_load_as_scenarios(n: int) -> None:
     ours, pick = tomllib.loads(text), tomllib.loads(PICK.read_text(encoding="utf-8"))
     for table in ("environment", "gripper", "friction", "task"):  # only the object differs
         assert ours[table] == pick[table]
+
+
+def test_scaling_growth_fits_the_exponent_of_time_against_graph_size() -> None:
+    from ldhp_tamp.bench import BenchRow
+
+    scaling = _scaling_module()
+
+    def row(name: str, edges: int, t: float, status: BenchStatus = BenchStatus.SOLVED) -> BenchRow:
+        return BenchRow(name, "x.toml", "pyperplan", 0, 100, 4, status, "", t, time_total_s=t, time_grasp_graph_s=t / 2,
+                        grasp_graph_nodes=edges // 10, grasp_graph_edges=edges, feasibility_checks=edges)
+
+    rows = [row("linear", e, 1e-4 * e) for e in (1000, 2000, 8000)]
+    rows += [row("square", e, 1e-8 * e * e) for e in (1000, 4000)] + [row("square", 9000, 5.0, BenchStatus.FAILED)]
+    text = scaling.growth(rows)
+    assert "- linear: 3 solved runs, edges 1000-8000; time ~ edges^1.00 (grasp-graph tier ~ edges^1.00)" in text
+    assert "- square: 2 solved runs, edges 1000-4000; time ~ edges^2.00" in text  # the failed run left out
 
 
 def test_a_solve_that_fails_past_the_time_limit_counts_as_a_timeout() -> None:

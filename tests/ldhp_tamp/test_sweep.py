@@ -310,3 +310,18 @@ def test_the_cli_offers_the_sweep_executors() -> None:
     from ldhp_tamp.sweep import EXECUTORS
 
     assert tuple(cli._EXECUTORS) == tuple(EXECUTORS)
+
+
+def test_bench_and_ablate_workers_preload_the_planner_and_its_engines() -> None:
+    """A cell's ``time_s`` counts no import: the forkserver has imported the planner and
+    made the engines (``ldhp_tamp.solver_preload``), which a solve would otherwise make."""
+    import subprocess
+    import sys
+
+    from ldhp_tamp import ablate, bench
+
+    assert "ldhp_tamp.solver_preload" in bench._TASK.preload
+    assert "ldhp_tamp.solver_preload" in ablate._TASK.preload
+    code = ("import ldhp_tamp.solver_preload, sys; import unified_planning.environment as e; "
+            "assert 'ldhp_tamp.tamp' in sys.modules and e.GLOBAL_ENVIRONMENT._factory is not None")
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -1,0 +1,24 @@
+"""What a sweep's worker processes load once, before their first cell.
+
+``ldhp-tamp bench`` and ``ldhp-tamp ablate`` run each cell in a process forked from a
+forkserver that has imported the modules of their :class:`ldhp_tamp.sweep.CellTask`
+``preload`` (:mod:`ldhp_tamp.sweep`). This module is one of them: importing it imports the
+planner and makes the symbolic tier's engines ready (unified-planning's engine factory,
+which imports every installed engine and with them ConfigSpace and scipy.stats: about
+0.8 s, and 0.1 s to make the factory), as :func:`ldhp_tamp.symbolic.load_checked_domain`
+would in each cell's solve. A cell's ``time_s`` then counts the solve, not these imports,
+as it counts no other import (``docs/benchmarks.md``, "The paper's tasks").
+
+``ldhp-tamp solve`` does not import it: there the engines are made while the solve loads,
+and ``time_s`` counts from the command's start anyway.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import ldhp_tamp.tamp  # noqa: F401  (the planner)
+from ldhp_tamp import symbolic
+
+with contextlib.suppress(Exception):  # an engine that fails to load fails the solve that uses it, with its message
+    symbolic.available_engines()
