@@ -96,7 +96,11 @@ class GraspOptions:
         the free one, evenly spaced over the full circle starting at the outward normal.
     closing_angles_deg : tuple of float
         Two-point model with a spacing *range*: closing directions, the inward normal at
-        finger 1's contact rotated by these angles (degrees).
+        finger 1's contact rotated by these angles (degrees). A pinch across two faces a
+        span D apart is offset along them by D tan(angle), which must stay within the
+        faces: across a 100 x 20 book's ends only angles below atan(20 / 110) = 10.3
+        degrees give a pinch whose fingers are at different heights (the one that
+        tips it), so small angles are sampled too (5 degrees apart up to 15).
     pad_heights : tuple of float
         Polyline model: where along the pad the sampled contact lies, as fractions of
         the pad length from the fingertip (0) to the pad's upper end (1).
@@ -119,7 +123,7 @@ class GraspOptions:
     edge_offsets: tuple[float, ...] | None = None
     vertex_fan: int = 3
     orientations: int = 8
-    closing_angles_deg: tuple[float, ...] = (0.0, -15.0, 15.0, -30.0, 30.0)
+    closing_angles_deg: tuple[float, ...] = (0.0, -15.0, 15.0, -30.0, 30.0, -5.0, 5.0, -10.0, 10.0)
     pad_heights: tuple[float, ...] = (0.1, 0.5)
     tip_angles_deg: tuple[float, ...] = (30.0, 60.0)
     free_widths: tuple[float, ...] = (1.0, 0.5)
