@@ -37,7 +37,7 @@ from geometry import collision, contacts, mechanics
 from geometry.errors import GeometryError
 from geometry.poses import BoolArray, IntArray, Pose, compose_batch, transform_points, wrap_angle
 from geometry.shapes import FloatArray, Polygon
-from geometry.tolerances import CONTACT_TOL, EPS, GRASP_OBJECT_TOL, PENETRATION_TOL
+from geometry.tolerances import CONTACT_TOL, EPS, GRASP_OBJECT_TOL, PENETRATION_TOL, VALIDATE_TOL
 from geometry.world import PolylineGripper, TwoPointGripper, World
 
 __all__ = [
@@ -96,7 +96,11 @@ class GraspOptions:
         the free one, evenly spaced over the full circle starting at the outward normal.
     closing_angles_deg : tuple of float
         Two-point model with a spacing *range*: closing directions, the inward normal at
-        finger 1's contact rotated by these angles (degrees).
+        finger 1's contact rotated by these angles (degrees). A pinch across two faces a
+        span D apart is offset along them by D tan(angle), which must stay within the
+        faces: across a 100 x 20 book's ends only angles below atan(20 / 110) = 10.3
+        degrees give a pinch whose fingers are at different heights (the one that
+        tips it), so small angles are sampled too (5 degrees apart up to 15).
     pad_heights : tuple of float
         Polyline model: where along the pad the sampled contact lies, as fractions of
         the pad length from the fingertip (0) to the pad's upper end (1).
@@ -119,7 +123,7 @@ class GraspOptions:
     edge_offsets: tuple[float, ...] | None = None
     vertex_fan: int = 3
     orientations: int = 8
-    closing_angles_deg: tuple[float, ...] = (0.0, -15.0, 15.0, -30.0, 30.0)
+    closing_angles_deg: tuple[float, ...] = (0.0, -15.0, 15.0, -30.0, 30.0, -5.0, 5.0, -10.0, 10.0)
     pad_heights: tuple[float, ...] = (0.1, 0.5)
     tip_angles_deg: tuple[float, ...] = (30.0, 60.0)
     free_widths: tuple[float, ...] = (1.0, 0.5)
@@ -229,13 +233,27 @@ class GraspSet:
         """(G, 2) finger-object friction coefficient of each contact (NaN if none).
 
         Resolved by :meth:`~geometry.world.Friction.gripper_mu` for the edge or vertex
-        touched (a vertex takes the smaller override of its two edges, if any).
+        touched (a vertex takes the smaller override of its two edges, if any). A
+        contact on an edge within the plan validator's contact tolerance
+        (:data:`~geometry.tolerances.VALIDATE_TOL`, plus :data:`CONTACT_TOL` of margin)
+        of one of its end vertices takes that vertex's: the validator counts it as a
+        contact at the vertex (plan rule 7), and a plan must not lean on friction that
+        its judge does not grant (a cover 0.7 mm from a frictionless end face).
         """
         n = self.n_object
         fr = world.friction
         table = np.array([fr.gripper_mu("l", i, n) for i in range(n)]
                          + [fr.gripper_mu("v", j, n) for j in range(n)] + [np.nan])
-        return table[np.where(self.feature < 0, 2 * n, self.feature)]
+        feature = np.where(self.feature < 0, 2 * n, self.feature)
+        on_edge = (self.feature >= 0) & (self.feature < n)
+        if on_edge.any():
+            verts = world.object.polygon.vertices
+            near = VALIDATE_TOL + CONTACT_TOL
+            for end in (0, 1):  # the edge's start vertex, then its end vertex
+                j = (np.where(on_edge, self.feature, 0) + end) % n
+                close = on_edge & (np.linalg.norm(np.nan_to_num(self.contact, nan=np.inf) - verts[j], axis=-1) <= near)
+                feature = np.where(close & (table[n + j] < table[feature]), n + j, feature)
+        return table[feature]
 
 
 # --------------------------------------------------------------------------------------

@@ -227,6 +227,9 @@ class GraspPlanResult:
     timings: Mapping[str, float] = field(default_factory=dict)
     candidates: int | None = None
     at_goal: bool = False
+    adjust_edges: tuple[Any, ...] = field(default=(), repr=False, compare=False)
+    """SOLVED: per step, the AdjustGrasp candidate edge it takes (what
+    :meth:`GraspPlanner.reject_adjust` marks infeasible), ``None`` for a MoveObject step."""
 
     @property
     def solved(self) -> bool:
@@ -604,6 +607,22 @@ class GraspPlanner:
             return False
         return self._drop(key, hit[0].indices == grasp) > 0
 
+    def reject_adjust(self, result: GraspPlanResult, step: int) -> bool:
+        """Mark the AdjustGrasp edge that plan step ``step`` of ``result`` takes as
+        infeasible: a judge downstream of this tier (the plan's validation, the forward
+        problem, the physics simulation) found that its motion does not execute. Returns
+        whether it was marked (False for a MoveObject step or an edge already known
+        infeasible); the next :meth:`plan` of the path avoids it (the layer's candidate
+        edges, with what is known of them, are cached per pose)."""
+        taken = result.adjust_edges[step] if 0 <= step < len(result.adjust_edges) else None
+        if taken is None:
+            return False
+        cands, i = taken
+        if cands.valid[i] < 0:
+            return False
+        cands.valid[i] = -1
+        return True
+
     def _drop(self, key: tuple[str, bytes], out: BoolArray) -> int:
         """Move the grasps of the cached G_m under ``key`` marked in ``out`` (aligned with
         its indices) to its rejected ones (at sample 0); returns how many."""
@@ -829,13 +848,13 @@ class GraspPlanner:
 
         # Steps.
         t0 = time.perf_counter()
-        steps, carried = self._steps(ctx, segments, layers, cands, node_path, edge_path)
+        steps, carried, taken = self._steps(ctx, segments, layers, cands, node_path, edge_path)
         timings["steps"] = time.perf_counter() - t0
         log.info("grasp graph: %d nodes, %d edges, %d intra-pose edges checked (%d feasible), %d steps",
                  nodes, edges, search.checked, search.feasible, len(steps))
         return GraspPlanResult(GraspPlanStatus.SOLVED, steps=tuple(steps), grasps=tuple(carried), cost=search.cost,
                                feasibility_checks=checks, time_s=time.perf_counter() - t_start,
-                               node_path=tuple(node_path), timings=timings, **common)
+                               node_path=tuple(node_path), timings=timings, adjust_edges=tuple(taken), **common)
 
     # ---- candidate edges ---------------------------------------------------------------
 
@@ -991,15 +1010,19 @@ class GraspPlanner:
     # ---- results -----------------------------------------------------------------------
 
     def _steps(self, ctx: AdjustContext, segments: Sequence[Segment], layers: list[_Layer], cands: list[list[_Cands]],
-               node_path: list[tuple[int, int]], edge_path: list[Any]) -> tuple[list[Step], list[int]]:
+               node_path: list[tuple[int, int]], edge_path: list[Any]
+               ) -> tuple[list[Step], list[int], list[tuple[_Cands, int] | None]]:
         steps: list[Step] = []
         carried: list[int] = []
+        taken: list[tuple[_Cands, int] | None] = []
         for (k0, g0), (k1, _), payload in zip(node_path, node_path[1:], edge_path):
             if payload is None:
                 carried.append(g0)
                 steps.append(self._move_step(ctx, segments[k0], g0))
+                taken.append(None)
                 continue
             k, pi, i = payload
+            taken.append((cands[k][pi], int(i)))
             prim = self.primitives[pi]
             edges = cands[k][pi].edges.take([i])
             pose = Pose.from_array(layers[k].pose)
@@ -1013,7 +1036,7 @@ class GraspPlanner:
             state = layers[k].state
             steps.append(Step(prim.name, Family.ADJUST_GRASP, params, (state, state), wps))
         carried.append(node_path[-1][1])
-        return steps, carried
+        return steps, carried, taken
 
     def _move_step(self, ctx: AdjustContext, seg: Segment, g: int, press: float | None = None) -> Step:
         """The MoveObject step of ``seg`` carrying grasp ``g``: the segment's dense poses

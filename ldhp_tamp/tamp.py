@@ -649,6 +649,11 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
                 rejected += 1
                 log.info("grasp %d no longer carries segment %d; planning the path again", res.grasps[k], k)
                 continue
+            if not carried and rejected < retries and planner.reject_adjust(res, verdict.step):
+                rejected += 1
+                log.info("the AdjustGrasp edge of plan step %d (%s) is left out; planning the path again",
+                         verdict.step, steps[verdict.step].primitive)
+                continue
             why = f"bottom tier: {verdict.reason}"
             return _BottomOutcome(segment=segments[k], reason=why, attempt=_Attempt(
                 why, FailureTier.JUDGE, verdict.cause or FailureCause.PLAN_INVALID, where=_where("judge", segments[k], k),

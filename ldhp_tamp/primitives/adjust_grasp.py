@@ -529,6 +529,14 @@ class AdjustContext:
         """(G, 2) finger-object friction of each contact (0 where none)."""
         return np.nan_to_num(self.grasps.contact_mu(self.world))
 
+    @cached_property
+    def edge_mu(self) -> FloatArray:
+        """(N + N,) finger-object friction of each object edge ``l_(i+1)``, then of each
+        vertex ``v_(j+1)`` (indexed by :attr:`GraspSet.feature`)."""
+        n = self.grasps.n_object
+        fr = self.world.friction
+        return np.array([fr.gripper_mu("l", i, n) for i in range(n)] + [fr.gripper_mu("v", j, n) for j in range(n)])
+
     def _q(self, x: ArrayLike) -> IntArray:
         return np.rint(np.asarray(x, dtype=float) / self.options.match_tol).astype(np.int64)
 
@@ -539,15 +547,16 @@ class AdjustContext:
     @cached_property
     def pivot_groups(self) -> tuple[_Groups, _Groups]:
         """Per finger k: grasps where finger k touches, keyed by the pivot point (the
-        finger's centre for a circle, its contact point for a pad) and the width."""
+        finger's centre for a circle, its contact point for a pad). Which pairs of a
+        group are pivots (the same width, or a pinch and a one-finger grasp) is
+        :meth:`Pivot._pairs`' business."""
         gs = self.grasps
         out = []
         for k in range(2):
             rows = np.flatnonzero(gs.touching[:, k])
             rows = rows[rows != NO_CONTACT]
             point = self.anchors[rows, k] if not self.is_polyline else gs.contact[rows, k]
-            keys = np.concatenate([self._q(point), self._q(gs.width[rows])[:, None]], axis=1)
-            out.append(_groups(keys, rows, len(gs)))
+            out.append(_groups(self._q(point), rows, len(gs)))
         return out[0], out[1]
 
     @cached_property
@@ -1399,16 +1408,34 @@ def _pivot_centre(ctx: AdjustContext, rows: IntArray, finger: IntArray) -> Float
 @REGISTRY.register("pivot", Family.ADJUST_GRASP)
 class Pivot(_AdjustGrasp):
     """``pivot``: turn the gripper about a touching finger k to another grasp keeping
-    finger k's contact (e.g. until the other finger touches too).
+    finger k's contact (e.g. until the other finger touches too); between a pinch and a
+    one-finger grasp the other finger also opens or closes.
 
     The centre is finger k's centre (two-point: the circle turns in place) or its contact
     point (polyline: the pad or fingertip corner turns about it; a pad on an object
     vertex turns its normal with it). Source and destination share finger k's pivot
-    point and the width (:attr:`AdjustContext.pivot_groups`); a polyline destination must
-    be the source turned about the point. Both senses are proposed (the long way round
-    may be the free one). Finger k is FIXED (STICKING), the other finger FREE between
-    the ends. Travel ``|angle|`` times the mean distance of the fingers' anchors from the
-    centre.
+    point (:attr:`AdjustContext.pivot_groups`); a polyline destination must be the
+    source turned about the point. They have the same width, or one is a pinch (both
+    fingers touching) and the other a one-finger grasp on finger k at a larger width:
+    the pinch lets go of its other finger (or the one-finger grasp closes it onto the
+    object) while turning about finger k. That is what a gripper holding an object that
+    does not rest alone can do to change its grasp, and the grasp set needs it: a pinch's
+    width and orientation come from where its second finger meets the object, a
+    one-finger grasp's from a few fixed widths and orientations, so the two never share
+    both (only a pinch closed straight along the contact normal shares an orientation
+    with a one-finger grasp, which ``open`` and ``close`` need).
+
+    Motion, three legs with finger k on its contact throughout: the other finger's width
+    goes from the source's to the *turn width*, the gripper turns about the centre, the
+    width goes to the destination's. Both senses of the turn are proposed (the long way
+    round may be the free one), and where the width changes, both turn widths: the wider
+    (``sense`` +-1: open first, or close last) and the narrower (``sense`` +-2: turn
+    first, then open; or close first, then turn onto the object) -- the other finger of
+    a pinch leaves the object along the width or across it. Finger k is FIXED over the
+    width legs (as in ``close``), FIXED over the turn for a pad and SLIDING for a round
+    finger (turning about its centre, its surface slips over the contact); the other
+    finger is FREE between the ends. Travel: ``|angle|`` times the mean distance of the
+    fingers' anchors from the centre at the turn width, plus half the width change.
     """
 
     name = "pivot"
@@ -1419,12 +1446,15 @@ class Pivot(_AdjustGrasp):
         is_src[src] = True
         out = []
         for k in range(2):
-            a, b, delta, rad = self._pairs(ctx, k)
+            a, b, delta, wide, narrow, radial = self._pairs(ctx, k)
             keep = is_src[a] & members[b]
-            a, b, delta, rad = a[keep], b[keep], delta[keep], rad[keep]
-            for sense in (1, -1):
-                ang = np.where(delta * sense > 0, delta, delta + sense * 2.0 * np.pi)
-                out.append((a, b, np.full(a.size, sense), np.full(a.size, k), np.abs(ang) * rad))
+            a, b, delta, wide, narrow, radial = a[keep], b[keep], delta[keep], wide[keep], narrow[keep], radial[keep]
+            both = np.flatnonzero(radial > 0.0)  # the width changes: both turn widths
+            for sense in (1, -1, 2, -2):
+                i = np.arange(a.size) if abs(sense) == 1 else both
+                rad = (wide if abs(sense) == 1 else narrow)[i]
+                ang = _turn(delta[i], np.sign(sense))
+                out.append((a[i], b[i], np.full(i.size, sense), np.full(i.size, k), np.abs(ang) * rad + radial[i]))
         if not out:
             z = np.zeros(0, np.int64)
             return z, z, z, z, np.zeros(0)
@@ -1432,12 +1462,15 @@ class Pivot(_AdjustGrasp):
         return a, b, sense, f, travel
 
     @staticmethod
-    def _pairs(ctx: AdjustContext, k: int) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
+    def _pairs(ctx: AdjustContext, k: int
+               ) -> tuple[IntArray, IntArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         """Every pivot about finger k in the grasp set, whatever the pose: (source,
-        target, turn angle, mean anchor radius) for sources touching with finger k and
-        targets sharing its pivot point and width (a polyline target must be the source
-        turned about it); sources ascending, targets in group order. Computed once per
-        grasp set; a layer keeps the pairs of its sources and G_T."""
+        target, turn angle, mean anchor radius at the wider and at the narrower width,
+        half the width change) for sources touching with finger k and targets sharing its
+        pivot point, at the same width or one a pinch and the other a one-finger grasp
+        on finger k at a larger width (a polyline target must be the source turned about
+        the point); sources ascending, targets in group order. Computed once per grasp
+        set; a layer keeps the pairs of its sources and G_T."""
         key = ("pivot-pairs", k)
         hit = ctx._cache.get(key)
         if hit is None:
@@ -1445,7 +1478,12 @@ class Pivot(_AdjustGrasp):
             tol = 5.0 * ctx.options.match_tol
             a, b = _group_pairs(ctx.pivot_groups[k], np.flatnonzero(gs.touching[:, k]))
             delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
-            keep = (a != b) & (np.abs(delta) > 1e-6)
+            wa, wb = gs.width[a], gs.width[b]
+            na, nb = gs.n_touching[a], gs.n_touching[b]
+            same = ctx._q(wa) == ctx._q(wb)
+            lets_go = (na == 2) & (nb == 1) & (wb > wa + EPS)  # a pinch opens its other finger
+            closes = (na == 1) & (nb == 2) & (wb < wa - EPS)  # ... or closes it
+            keep = (a != b) & (np.abs(delta) > 1e-6) & (same | lets_go | closes)
             centre = np.nan_to_num(_pivot_centre(ctx, a, np.full(a.size, k)))
             if ctx.is_polyline and a.size:
                 c, s = np.cos(delta), np.sin(delta)
@@ -1453,30 +1491,69 @@ class Pivot(_AdjustGrasp):
                 moved = centre + np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
                 keep &= np.linalg.norm(np.nan_to_num(moved - ctx.anchors[b, k], nan=np.inf), axis=1) <= tol
             a, b, delta, centre = a[keep], b[keep], delta[keep], centre[keep]
-            rad = 0.5 * (np.linalg.norm(ctx.anchors[a, 0] - centre, axis=1)
-                         + np.linalg.norm(ctx.anchors[a, 1] - centre, axis=1))
-            hit = ctx._cache[key] = (a, b, delta, rad)
+            wa = gs.width[a]
+            wb = np.where(same[keep], wa, gs.width[b])  # a pivot at one width keeps the source's
+            rad = [_turn_radius(ctx, a, k, centre, w) for w in (np.maximum(wa, wb), np.minimum(wa, wb))]
+            hit = ctx._cache[key] = (a, b, delta, rad[0], rad[1], 0.5 * np.abs(wb - wa))
         return hit
 
     def motion(self, context: AdjustContext, pose: Pose, edges: IntraEdges) -> GripperMotion:
         gs = context.grasps
         a, b, k = edges.src, edges.dst, edges.finger
-        delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]).reshape(-1)
-        ang = np.where(delta * edges.sense > 0, delta, delta + edges.sense * 2.0 * np.pi)
-        leg = _rotation(gs.gripper[a], _pivot_centre(context, a, k), ang, gs.width[a])
+        wa = gs.width[a]
+        wb = np.where(context._q(gs.width[b]) == context._q(wa), wa, gs.width[b])  # one width: the source's
+        wt = np.where(np.abs(edges.sense) == 1, np.maximum(wa, wb), np.minimum(wa, wb))
+        ang = _turn(wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]).reshape(-1), np.sign(edges.sense))
+        g0 = _at_width(context, a, k, wt)  # source orientation, turn width
+        g1 = _at_width(context, b, k, wt)  # destination orientation, turn width
+        open_leg = _linear(gs.gripper[a], g0, wa, wt)
+        _keep_finger(context, open_leg, a, k, FingerRole.FIXED)
+        turn_leg = _rotation(g0, _pivot_centre(context, a, k), ang, wt)
         turn = context.is_polyline & (gs.feature[a, k] >= gs.n_object) & (gs.part[a, k] == FingerPart.PAD)
         # A pad or fingertip corner turns about its contact point: it sticks. A round
         # finger turns about its centre: its surface slips over the contact by radius x
         # turn, so the contact is SLIDING (sample_motion derives the direction).
         role = FingerRole.FIXED if context.is_polyline else FingerRole.SLIDING
-        _keep_finger(context, leg, a, k, role, np.asarray(turn, dtype=bool).reshape(-1))
-        return _assemble(a, b, [leg])
+        _keep_finger(context, turn_leg, a, k, role, np.asarray(turn, dtype=bool).reshape(-1))
+        close_leg = _linear(g1, _at_width(context, b, k, wb), wt, wb)
+        _keep_finger(context, close_leg, b, k, FingerRole.FIXED)
+        return _assemble(a, b, [open_leg, turn_leg, close_leg])
 
     def parameters(self, context: AdjustContext, edges: IntraEdges, index: int = 0) -> dict[str, Any]:
         out = super().parameters(context, edges, index)
-        m = self.motion(context, Pose(0.0, 0.0, 0.0), edges.take([index]))
-        out["angle"] = round(math.degrees(float(m.angle[0, 0])), 4)
+        one = edges.take([index])
+        m = self.motion(context, Pose(0.0, 0.0, 0.0), one)
+        out["sense"] = int(np.sign(one.sense[0]))
+        out["angle"] = round(math.degrees(float(m.angle[0, 1])), 4)
+        out["turn_width"] = round(float(m.width[0, 1]), 4)
         return out
+
+
+def _turn(delta: FloatArray, sense: ArrayLike) -> FloatArray:
+    """The turn by ``delta`` (wrapped) the ``sense`` way round (+1 counter-clockwise)."""
+    sense = np.asarray(sense, dtype=float)
+    return np.where(delta * sense > 0, delta, delta + sense * 2.0 * np.pi)
+
+
+def _at_width(ctx: AdjustContext, rows: IntArray, finger: IntArray, width: FloatArray) -> FloatArray:
+    """Object-frame gripper poses of grasps ``rows`` with the width changed to ``width``
+    and finger ``finger``'s anchor kept where it is (the other finger moves)."""
+    g = ctx.grasps.gripper[rows].copy()
+    ex = np.stack([np.cos(g[:, 2]), np.sin(g[:, 2])], axis=1)
+    sign = np.where(np.asarray(finger) == 0, -1.0, 1.0)  # finger 1 sits at o - (w / 2) e_x
+    g[:, :2] = ctx.anchors[rows, finger] - (sign * 0.5 * width)[:, None] * ex
+    return g
+
+
+def _turn_radius(ctx: AdjustContext, rows: IntArray, finger: int, centre: FloatArray, width: FloatArray) -> FloatArray:
+    """Mean distance from ``centre`` of the two fingers' anchors of grasps ``rows`` at
+    ``width`` with finger ``finger``'s anchor kept (what :meth:`GripperMotion.travel`
+    takes for the turn)."""
+    g = ctx.grasps.gripper[rows]
+    ex = np.stack([np.cos(g[:, 2]), np.sin(g[:, 2])], axis=1)
+    kept = ctx.anchors[rows, finger]
+    other = kept + ((1.0 if finger == 0 else -1.0) * width)[:, None] * ex
+    return 0.5 * (np.linalg.norm(kept - centre, axis=1) + np.linalg.norm(other - centre, axis=1))
 
 
 @REGISTRY.register("slide", Family.ADJUST_GRASP)
@@ -1532,6 +1609,12 @@ class Slide(_AdjustGrasp):
         leg = _linear(gs.gripper[a], gs.gripper[b], gs.width[a], gs.width[b])
         _keep_finger(context, leg, a, k, FingerRole.SLIDING)
         _keep_finger(context, leg, a, 1 - k, FingerRole.SLIDING, where=gs.touching[a, 1 - k])
+        # Between the ends a sliding contact is on the edge, with the edge's coefficient
+        # (a grasp near a vertex has the vertex's, ``GraspSet.contact_mu``; the ends keep
+        # the grasps' own). Friction that opposes a slip does not only help: the
+        # coefficient must be the one the finger meets, not a smaller one.
+        assert leg.mu is not None and leg.role is not None
+        leg.mu = np.where(leg.role == FingerRole.SLIDING, context.edge_mu[np.maximum(gs.feature[a], 0)], leg.mu)
         return _assemble(a, b, [leg])
 
 

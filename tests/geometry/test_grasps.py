@@ -784,3 +784,27 @@ def test_a_pinch_lift_within_the_force_limit_needs_weight_over_two_mu() -> None:
     need = world.object.weight / (2 * 0.6)
     assert not within_force_limit(world, gs, path, across, 0.9 * need).any()
     assert within_force_limit(world, gs, path, across, 2.0 * need).all()
+
+
+def test_a_contact_the_validator_counts_at_a_vertex_has_the_vertexs_friction() -> None:
+    """Plan rule 7 takes a finger contact within its contact tolerance of an object vertex
+    as a contact at the vertex, with the vertex's coefficient (the smaller override of its
+    two edges). A grasp sampled there has the same, not its edge's: a pinch 0.7 mm from
+    a frictionless end face cannot lean on the cover's friction."""
+    from geometry.tolerances import VALIDATE_TOL
+
+    world = make_world(TwoPointGripper(R, (10.0, 150.0)), obj=PICK_BLOCK)
+    world = World(world.object, world.environment, world.gripper,
+                  Friction(0.3, 0.6, object_edges_gripper={1: 0.0}))  # l2, the right end, frictionless
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=100))
+    mu = gs.contact_mu(world)
+    verts = world.object.polygon.vertices
+    on_cover = gs.touching & np.isin(gs.feature, [0, 2])  # l1 bottom, l3 top
+    d = np.stack([np.linalg.norm(np.nan_to_num(gs.contact - v, nan=np.inf), axis=-1) for v in verts[[1, 2]]]).min(axis=0)
+    near = on_cover & (d <= VALIDATE_TOL)
+    assert near.any() and (mu[near] == 0.0).all()  # v2, v3: next to the frictionless l2
+    assert (mu[on_cover & (d > VALIDATE_TOL + CONTACT_TOL)] == 0.6).all()
+    far = on_cover & (np.stack([np.linalg.norm(np.nan_to_num(gs.contact - v, nan=np.inf), axis=-1)
+                                for v in verts[[0, 3]]]).min(axis=0) <= VALIDATE_TOL)
+    assert far.any() and (mu[far] == 0.6).all()  # v1, v4: both edges 0.6
+    assert (mu[gs.touching & (gs.feature == 1)] == 0.0).all() and np.isnan(mu[~gs.touching]).all()

@@ -44,6 +44,9 @@ goal = [0, 0, 0]
 """
 POLYLINE = 'model = "polyline"\nfinger = [[0, 0], [10, 0], [10, 45], [0, 45]]\nopening = [0, 140]'
 TWO_POINT = 'model = "two-point"\nfinger_radius = 5\nspacing = [40, 40]'
+#: A two-point gripper that opens and closes: its pinches have the widths and closing
+#: angles at which the second finger meets the object.
+RANGED = 'model = "two-point"\nfinger_radius = 5\nspacing = [10, 150]'
 #: A wall beside the middle of the block's top, clear of it: the half turn of a flip there hits it.
 WALL = '[[environment.solids]]\nname = "wall"\nvertices = [[62, 48], [90, 48], [90, 200], [62, 200]]'
 T0 = Pose(0.0, 0.0, 0.0)
@@ -87,6 +90,11 @@ def poly() -> Case:
 @pytest.fixture(scope="module")
 def two_point() -> Case:
     return Case(TWO_POINT)
+
+
+@pytest.fixture(scope="module")
+def ranged() -> Case:
+    return Case(RANGED)
 
 
 def finger_moves(case: Case, step: Step) -> tuple[float, float]:
@@ -347,8 +355,11 @@ def test_slide_candidates_from_the_precomputed_pairs_are_the_per_layer_ones() ->
             np.testing.assert_array_equal(x, y)
 
 
-@pytest.mark.parametrize("scenario", ["task1_zero_mobility_lift", "task2_slot_insertion"])
+@pytest.mark.parametrize("scenario", ["task1_zero_mobility_lift", "task2_slot_insertion", "cmgmp_book_stand_up"])
 def test_pivot_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(scenario: str) -> None:
+    """The candidates of a layer are the pairs of its sources and members among the grasps
+    sharing the pivot point: at one width, or a pinch and a one-finger grasp on the kept
+    finger at a larger width (both turn widths for those); both senses each."""
     from pathlib import Path
 
     from geometry.poses import wrap_angle
@@ -366,22 +377,105 @@ def test_pivot_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(scen
     for k in range(2):
         a, b = _group_pairs(ctx.pivot_groups[k], src[gs.touching[src, k]])
         delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
-        keep = members[b] & (a != b) & (np.abs(delta) > 1e-6)
+        wa, wb, na, nb = gs.width[a], gs.width[b], gs.n_touching[a], gs.n_touching[b]
+        same = np.rint(wa / 1e-4) == np.rint(wb / 1e-4)
+        change = ((na == 2) & (nb == 1) & (wb > wa)) | ((na == 1) & (nb == 2) & (wb < wa))
+        keep = members[b] & (a != b) & (np.abs(delta) > 1e-6) & (same | change)
         centre = np.nan_to_num(_pivot_centre(ctx, a, np.full(a.size, k)))
         if ctx.is_polyline and a.size:
             c, s = np.cos(delta), np.sin(delta)
             r = ctx.anchors[a, k] - centre
             moved = centre + np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
             keep &= np.linalg.norm(np.nan_to_num(moved - ctx.anchors[b, k], nan=np.inf), axis=1) <= 5.0 * ctx.options.match_tol
-        a, b, delta, centre = a[keep], b[keep], delta[keep], centre[keep]
-        rad = 0.5 * (np.linalg.norm(ctx.anchors[a, 0] - centre, axis=1) + np.linalg.norm(ctx.anchors[a, 1] - centre, axis=1))
-        for sense in (1, -1):
-            ang = np.where(delta * sense > 0, delta, delta + sense * 2.0 * np.pi)
-            want.append((a, b, np.full(a.size, sense), np.full(a.size, k), np.abs(ang) * rad))
+        a, b, delta, centre, change = a[keep], b[keep], delta[keep], centre[keep], change[keep] & ~same[keep]
+        wa, wb = gs.width[a], np.where(change, gs.width[b], gs.width[a])
+        phi = gs.gripper[a, 2]
+        ex = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+        for sense in (1, -1, 2, -2):
+            i = np.arange(a.size) if abs(sense) == 1 else np.flatnonzero(change)
+            wt = (np.maximum if abs(sense) == 1 else np.minimum)(wa, wb)[i]
+            other = ctx.anchors[a[i], k] + ((1.0 if k == 0 else -1.0) * wt)[:, None] * ex[i]
+            rad = 0.5 * (np.linalg.norm(ctx.anchors[a[i], k] - centre[i], axis=1) + np.linalg.norm(other - centre[i], axis=1))
+            d = delta[i]
+            ang = np.where(d * np.sign(sense) > 0, d, d + np.sign(sense) * 2.0 * np.pi)
+            want.append((a[i], b[i], np.full(i.size, sense), np.full(i.size, k), np.abs(ang) * rad + 0.5 * np.abs(wb - wa)[i]))
     want = [np.concatenate(x) for x in zip(*want)]
     assert want[0].size > 20
-    for x, y in zip(got, want):
+    for x, y in zip(got[:4], want[:4]):
         np.testing.assert_array_equal(x, y)
+    np.testing.assert_allclose(got[4], want[4], rtol=1e-12, atol=1e-9)
+    if not sc.world.gripper.fixed_width:
+        assert (np.abs(want[2]) == 2).any()  # a gripper that opens lets go of a finger turning
+
+
+def test_a_pinch_lets_go_of_a_finger_turning_about_the_other(ranged: Case):
+    """A pinch's width and orientation come from where its second finger meets the
+    object, a one-finger grasp's from a few fixed widths and orientations: most pinches
+    share neither with any one-finger grasp, so ``open`` (same orientation) cannot let go
+    of a finger, and a same-width ``pivot`` finds no partner. ``pivot`` between a pinch and
+    a one-finger grasp on the kept finger does it (opening before or after the turn), and
+    its reverse closes the finger onto the object; the plan validates, finger k never lets
+    go, the other finger leaves the object at once."""
+    gs = ranged.grasps
+    members = np.isin(np.arange(len(gs)), ranged.gt)
+    pinch = ranged.gt[gs.n_touching[ranged.gt] == 2]
+    opened = ag.Open().propose(ranged.ctx, T0, pinch, members)
+    stuck = np.setdiff1d(pinch, opened.src[opened.dst != ag.NO_CONTACT])
+    assert stuck.size > pinch.size // 2  # most pinches: no open to one finger
+    pivot = ag.Pivot().propose(ranged.ctx, T0, pinch, members)
+    release = np.flatnonzero(gs.n_touching[pivot.dst] == 1)
+    assert np.isin(stuck, pivot.src[release]).all()  # ... every one can let go by pivoting
+    edges = pivot.take(release)
+    assert set(np.unique(edges.sense).tolist()) == {-2, -1, 1, 2}
+    k = edges.finger
+    assert np.allclose(gs.contact[edges.src, k], gs.contact[edges.dst, k]) and (gs.width[edges.dst] > gs.width[edges.src]).all()
+    # the closed-form travel is the motion's
+    sub = edges.take(np.linspace(0, len(edges) - 1, 60).astype(int))
+    assert sub.travel == pytest.approx(ag.Pivot().motion(ranged.ctx, T0, sub).travel(ranged.ctx), rel=1e-9, abs=1e-9)
+    # the reverse of each is proposed: a one-finger grasp turns and closes onto the pinch
+    back = ag.Pivot().propose(ranged.ctx, T0, np.unique(edges.dst), members)
+    assert set(zip(edges.dst.tolist(), edges.src.tolist(), edges.sense.tolist())) <= set(
+        zip(back.src.tolist(), back.dst.tolist(), (-back.sense).tolist()))
+    res = ag.Pivot().check(ranged.ctx, T0, edges)
+    ok = res.ok & ranged.approachable(edges.src)
+    assert ok.any() and set(np.unique(edges.sense[res.ok]).tolist()) == {-2, -1, 1, 2}
+    for i in np.flatnonzero(ok)[:: max(1, int(ok.sum()) // 3)]:
+        step = ranged.step(ag.Pivot(), edges, int(i))
+        ranged.validate([ranged.approach_to(int(edges.src[i])), step])
+        f = int(edges.finger[i])
+        assert len({w.finger_contacts[f] for w in step.waypoints}) == 1 and None not in {
+            w.finger_contacts[f] for w in step.waypoints}
+        assert step.waypoints[0].finger_contacts[1 - f] is not None
+        assert all(w.finger_contacts[1 - f] is None for w in step.waypoints[1:])
+        move, dw = finger_moves(ranged, step)
+        assert move <= 4.0 + 1e-9 and dw <= 4.0 + 1e-9
+        assert step.parameters["sense"] in (-1, 1) and step.parameters["turn_width"] in (
+            pytest.approx(gs.width[edges.src[i]], abs=1e-3), pytest.approx(gs.width[edges.dst[i]], abs=1e-3))
+
+
+def test_a_slide_meets_the_edges_friction_between_its_ends() -> None:
+    """A grasp within the validator's contact tolerance of a vertex has the vertex's
+    coefficient (here a frictionless end face's); a slide from it meets the edge's own
+    coefficient once it is on the edge. Friction that opposes a slip is not always on
+    the safe side, so a smaller coefficient is no conservative stand-in."""
+    sc = load_scenario_string(BLOCK.format(name="block", extra="", gripper=RANGED).replace(
+        'gripper = 0.6', 'gripper = 0.6\nobject_edges = [{ edge = "l2", gripper = 0.0 }]'), "block")
+    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=100))
+    ctx = ag.AdjustContext(sc.world, gs)
+    top = (gs.feature == 2) & gs.touching  # on l3, the top, from (100, 40) to (0, 40)
+    near = top & (np.linalg.norm(np.nan_to_num(gs.contact - [100.0, 40.0], nan=np.inf), axis=-1) <= 1.0)
+    assert near.any() and (ctx.mu[near] == 0.0).all() and (ctx.mu[top & ~near] == 0.6).all()
+    rows = np.flatnonzero(near.any(axis=1))
+    gt = pose_conditioned(sc.world, gs, T0.as_array())
+    members = np.isin(np.arange(len(gs)), gt)
+    slide = ag.Slide().propose(ctx, T0, rows[np.isin(rows, gt)], members)
+    slide = slide.take(np.flatnonzero(near[slide.src, slide.finger]))  # the sliding finger starts near v3
+    assert len(slide)
+    smp = ag.sample_motion(ctx, ag.Slide().motion(ctx, T0, slide.take(np.arange(min(len(slide), 30)))))
+    inner = ~(smp.first | smp.last)
+    k = slide.finger[smp.edge]
+    assert inner.any() and (smp.mu[np.arange(len(smp)), k][inner] == 0.6).all()
+    assert (smp.mu[np.arange(len(smp)), k][smp.first] == 0.0).all()
 
 
 def test_every_sample_of_a_slide_is_checked_sliding_even_a_short_one(poly: Case):

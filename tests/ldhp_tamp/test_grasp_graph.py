@@ -398,3 +398,26 @@ def test_a_force_limit_the_judge_met_leaves_a_segments_set_at_once(pick: Scenari
             assert removed == before and after == left
             assert planner.bound_forces(seg) == 0  # once
             assert planner.plan(PosePath((seg,))).status is GraspPlanStatus.NO_GRASP_FOR_SEGMENT
+
+
+def test_an_adjust_grasp_edge_a_judge_refused_is_left_out_of_the_next_plan(pick: Scenario, pick_grasps):
+    """A judge downstream (validation, the forward problem, the simulation) that refuses
+    a plan at an AdjustGrasp step has that edge marked infeasible: the same path planned
+    again takes another way; a MoveObject step or an edge already refused is not marked."""
+    world = pick.world
+    path = PosePath((lift(world, pick.start, 100.0),))
+    planner = GraspPlanner(world, pick_grasps, bindings())
+    first = planner.plan(path)
+    assert first.solved and len(first.adjust_edges) == len(first.steps)
+    adjust = [i for i, s in enumerate(first.steps) if s.family is Family.ADJUST_GRASP]
+    move = [i for i, s in enumerate(first.steps) if s.family is Family.MOVE_OBJECT]
+    assert adjust and move and all(first.adjust_edges[i] is None for i in move)
+    assert not planner.reject_adjust(first, move[0])
+    i = adjust[0]
+    assert planner.reject_adjust(first, i) and not planner.reject_adjust(first, i)
+    again = planner.plan(PosePath((lift(world, pick.start, 100.0),)))
+    assert again.solved and again.cost >= first.cost
+    taken = {(id(c), j) for c, j in (e for e in again.adjust_edges if e is not None)}
+    cands, j = first.adjust_edges[i]
+    assert (id(cands), j) not in taken and cands.valid[j] == -1
+    validate(pick, again.steps)
