@@ -46,6 +46,7 @@ __all__ = [
     "Point",
     "PRESS_KEY",
     "Press",
+    "press_problem",
     "Step",
     "TIME_KEYS",
     "Waypoint",
@@ -131,6 +132,31 @@ class Waypoint:
             object.__setattr__(self, "finger_forces", forces)
 
 
+def _parse_press(raw: Any) -> Press:
+    return Press(int(raw["finger"]), float(raw["force_n"]))
+
+
+def press_problem(step: "Step") -> str | None:
+    """Why ``step.parameters.press`` is not a press of this planner's convention, or
+    ``None`` (also when the step has no such key)."""
+    raw = step.parameters.get(PRESS_KEY)
+    if raw is None:
+        return None
+    if step.family is not Family.MOVE_OBJECT:
+        return "only a move-object step may ask for a press"
+    if not isinstance(raw, Mapping) or set(raw) != {"finger", "force_n"}:
+        return 'expected {"finger": 0 or 1, "force_n": newtons}'
+    finger, force = raw["finger"], raw["force_n"]
+    if isinstance(finger, bool) or not isinstance(finger, int) or isinstance(force, bool) \
+            or not isinstance(force, (int, float)):
+        return 'expected {"finger": 0 or 1, "force_n": newtons}'
+    if finger not in (0, 1):
+        return f"finger must be 0 or 1, got {finger!r}"
+    if not (math.isfinite(force) and force > 0):
+        return f"force_n must be a positive number of newtons, got {force!r}"
+    return None
+
+
 #: The step parameter that asks the executor for a press (:class:`Press`).
 PRESS_KEY = "press"
 
@@ -145,7 +171,8 @@ class Press:
     planned with that finger's normal force held at ``force_n`` (its compliance keeps it
     there while the object follows the plan). The parameter is this planner's, within
     the spec's free-form ``parameters``: an executor that does not know it replays the
-    step without the press."""
+    step without the press, and a key of that name that does not follow the convention
+    is read as no press (with a warning), never refused."""
 
     finger: int
     force_n: float
@@ -182,23 +209,18 @@ class Step:
         object.__setattr__(self, "waypoints", tuple(self.waypoints))
         if len(self.contact_state) != 2:
             raise ValueError("contact_state is a (from, to) pair")
-        self.press  # noqa: B018 -- a malformed press is refused when the step is made
 
     @property
     def press(self) -> Press | None:
-        """The press this move-object step asks for (``parameters.press``), or ``None``."""
-        raw = self.parameters.get(PRESS_KEY)
-        if raw is None:
+        """The press this move-object step asks for (``parameters.press``), or ``None``.
+
+        ``parameters`` is free-form in the spec, so another tool's key of that name that
+        does not follow this planner's convention (a move-object step,
+        ``{"finger": 0 or 1, "force_n": positive newtons}``) is no press: ``None``, with
+        :func:`press_problem` saying why."""
+        if self.parameters.get(PRESS_KEY) is None or press_problem(self):
             return None
-        if self.family is not Family.MOVE_OBJECT:
-            raise ValueError("press: only a move-object step may ask for a press")
-        if not isinstance(raw, Mapping) or set(raw) != {"finger", "force_n"}:
-            raise ValueError('press: expected {"finger": 0 or 1, "force_n": newtons}')
-        finger, force = raw["finger"], raw["force_n"]
-        if isinstance(finger, bool) or not isinstance(finger, int) or isinstance(force, bool) \
-                or not isinstance(force, (int, float)):
-            raise ValueError('press: expected {"finger": 0 or 1, "force_n": newtons}')
-        return Press(finger, float(force))
+        return _parse_press(self.parameters[PRESS_KEY])
 
 
 class FailureTier(str, enum.Enum):
@@ -423,13 +445,13 @@ class _Reader:
         wps = self.key(d, "waypoints", where)
         if not isinstance(wps, list):
             self.fail(f"{where}.waypoints", f"expected a list, got {_kind(wps)}")
-        try:
-            return Step(primitive, Family(family), parameters, (cs_from, cs_to),
-                        tuple(self.waypoint(w, f"{where}.waypoints[{i}]") for i, w in enumerate(wps)))
-        except ValueError as exc:
-            if str(exc).startswith("press:"):
-                self.fail(f"{where}.parameters.{PRESS_KEY}", str(exc)[len("press: "):])
-            raise
+        step = Step(primitive, Family(family), parameters, (cs_from, cs_to),
+                    tuple(self.waypoint(w, f"{where}.waypoints[{i}]") for i, w in enumerate(wps)))
+        problem = press_problem(step)
+        if problem:  # free-form in the spec: read, not refused; an executor replays no press
+            log.warning("%s: %s.parameters.%s is not a press of this planner's convention (%s): no press",
+                        self.source, where, PRESS_KEY, problem)
+        return step
 
     def stats(self, value: Any) -> PlanStats:
         d = self.obj(value, "stats")
