@@ -58,7 +58,9 @@ from geometry.grasps import (
     MotionGrasps,
     motion_conditioned,
     rate_motion_grasps,
+    PRESS_LADDER,
     pose_conditioned,
+    press_forces,
     within_force_limit,
 )
 from geometry.poses import BoolArray, IntArray, Pose, compose_batch, transform_points, wrap_angle
@@ -606,6 +608,35 @@ class GraspPlanner:
         if hit is None:
             return False
         return self._drop(key, hit[0].indices == grasp) > 0
+
+    def raise_press(self, segment: Segment, grasp: int) -> float | None:
+        """Give ``grasp`` the next press of :data:`geometry.grasps.PRESS_LADDER` above the
+        one it carries ``segment`` with in the cached G_m, when a judge downstream (the
+        physics simulation: a press of 2 W against a stiff wall is a 0.2 mm guarded move,
+        which the object's first lag undoes) refused the step: the higher press must pass
+        every test of :func:`geometry.grasps.press_forces` along the segment, as the first
+        did. Returns the new press (N), or ``None`` (no press, none higher that makes the
+        motion: the caller rejects the grasp instead)."""
+        key = _motion_key(segment)
+        hit = self._motion_sets.get(key)
+        if hit is None:
+            return None
+        mg, n_cand = hit
+        now = mg.press_of(grasp)
+        if now is None or mg.press is None:
+            return None
+        weight = self.world.object.weight
+        higher = tuple(f for f in PRESS_LADDER if f * weight > now * (1.0 + 1e-9))
+        if not higher:
+            return None
+        force = float(press_forces(self.world, self.grasps, segment.poses, np.array([grasp]), ladder=higher)[0])
+        if not np.isfinite(force):
+            return None
+        press = np.array(mg.press, dtype=float)
+        press[np.flatnonzero(mg.indices == grasp)[0]] = force
+        press.setflags(write=False)
+        self._motion_sets[key] = (replace(mg, press=press), n_cand)
+        return force
 
     def reject_adjust(self, result: GraspPlanResult, step: int) -> bool:
         """Mark the AdjustGrasp edge that plan step ``step`` of ``result`` takes as

@@ -84,14 +84,36 @@ class Segment:
         """A contact-sensitive segment (``tip``, ``biplanar-slide``) with a sample to cut at."""
         return self.primitive in REFINABLE and self.parameter_values.size >= 3
 
-    def split(self, at: int | None = None) -> tuple["Segment", "Segment"]:
+    def split(self, at: int | None = None, *, value: float | None = None) -> tuple["Segment", "Segment"]:
         """Bisect the parameter range (paper: dichotomy refinement).
 
         The cut is the dense sample nearest the middle of the range (at most half a
         waypoint step, 2 mm of vertex motion, from it), or sample ``at`` when given (an
         interior sample), so the halves' samples are the parent's own: its first
         ``i + 1`` and its last ``J - i + 1``.
+
+        With ``value`` (a parameter strictly between ``s0`` and ``s1`` that is no sample,
+        e.g. a rest window narrower than the samples' spacing) the cut is there instead:
+        the halves keep ``self`` as their parent (for the refinement count) but take
+        dense samples of their own, ending and starting exactly at the cut.
         """
+        if value is not None:
+            lo, hi = sorted((self.s0, self.s1))
+            if not lo < value < hi:
+                raise ValueError(f"cut {value} is not inside the parameter range [{lo}, {hi}]")
+            cut_state = contact_state(self.world, Pose.from_array(self.motion.poses(np.array([value]))[0]))
+            key = "angle" if self.motion.kind is not MotionKind.TRANSLATE else "travel"
+
+            def length(a: float, b: float) -> dict[str, Any]:
+                out = dict(self.parameters)
+                if key in out:
+                    out[key] = math.degrees(abs(b - a)) if key == "angle" else abs(b - a)
+                return out
+
+            return (replace(self, to_state=cut_state, s1=value, parameters=length(self.s0, value),
+                            depth=self.depth + 1, parent=self, span=None),
+                    replace(self, from_state=cut_state, s0=value, parameters=length(value, self.s1),
+                            depth=self.depth + 1, parent=self, span=None))
         values = self.parameter_values
         n = values.size
         if n < 3:

@@ -30,6 +30,8 @@ import numpy as np
 
 from geometry.contacts import rests_alone
 from geometry.grasps import GraspOptions, enumerate_grasps
+from geometry.kinematics import dense_parameters
+from geometry.tolerances import WAYPOINT_STEP
 from ldhp_tamp import budget, symbolic
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
@@ -582,14 +584,42 @@ def _segment_of_step(steps: Sequence[Step], step: int) -> tuple[int, bool]:
 REST_FRICTION = 0.8
 
 
-def _rest_cut(seg: Segment) -> int | None:
+def _rest_cut(seg: Segment) -> int | float | None:
     """Where to cut a failing segment: the middle of its longest run of interior samples at
     which the object rests on the environment alone (``REST_FRICTION`` of every
     coefficient), so that the gripper can let go and regrasp there (``open``,
     ``approach-contact``: windows a fraction of a degree wide are found from the statics
     of the segment's own samples); ``None`` (the middle of the range) when there is none."""
     n = seg.poses.shape[0]
-    return _middle_of_longest([(max(a, 1), min(b, n - 1)) for a, b in _rest_runs(seg) if min(b, n - 1) > max(a, 1)])
+    return _robust(seg, [(max(a, 1), min(b, n - 1)) for a, b in _rest_runs(seg) if min(b, n - 1) > max(a, 1)])
+
+
+#: A run of fewer rest samples than this is a window about as narrow as the samples are
+#: apart: its one sample may sit at its edge (the stand-up of gen_slot_corner_start at
+#: 24.54 degrees from upright, the edge of 24.5-25.0, where the simulated block, let go,
+#: stands up into the corner), so the cut is the middle of the window found on the finer
+#: grid instead. (A run of two may sit at an edge too: task 2's ladder slide rests at
+#: 25.3 and 26.4 degrees, the finer grid's middle is 25.8; left as it is, the task's
+#: plans executing.)
+NARROW_RUN = 2
+
+
+def _robust(seg: Segment, runs: list[tuple[int, int]]) -> int | float | None:
+    """The middle sample of the longest of ``runs`` when it holds at least
+    ``NARROW_RUN`` samples; otherwise the middle of the window on the finer grid
+    (:func:`_fine_window`), or that sample when there is none."""
+    at = _middle_of_longest(runs)
+    if at is not None and max(b - a for a, b in runs) >= NARROW_RUN:
+        return at
+    fine = _fine_window(seg)
+    return fine if fine is not None else at
+
+
+def _split(seg: Segment, at: int | float | None) -> tuple[Segment, Segment]:
+    """``seg`` cut at a sample index, at a parameter value between samples, or in the middle."""
+    if isinstance(at, float):
+        return seg.split(value=at)
+    return seg.split(at)
 
 
 @dataclass(frozen=True)
@@ -645,6 +675,15 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
                 log.info("segment %d: the grasps that need more than the force limit leave its G_m; "
                          "planning the path again", k)
                 continue
+            if (carried and rejected < retries and verdict.cause is FailureCause.DIVERGES_IN_SIMULATION
+                    and (force := planner.raise_press(segments[k], res.grasps[k])) is not None):
+                # a pressed step the simulation refused (the rigid checks passed it): the
+                # same grasp pressed harder (the ladder's next force that passes every
+                # press test) before it leaves G_m
+                rejected += 1
+                log.info("grasp %d carries segment %d pressed to %.3g N now; planning the path again",
+                         res.grasps[k], k, force)
+                continue
             if carried and rejected < retries and planner.reject_carry(segments[k], res.grasps[k]):
                 rejected += 1
                 log.info("grasp %d no longer carries segment %d; planning the path again", res.grasps[k], k)
@@ -668,7 +707,7 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
             # grasps carried so far: let the gripper regrasp where the object rests
             # alone on the way there, at the latest such window not yet a layer.
             root = _root(segments[j])
-            segments[j:j + 1] = list(segments[j].split(_window_cut(segments[j])))
+            segments[j:j + 1] = list(_split(segments[j], _window_cut(segments[j])))
             per_root[id(root)] = per_root.get(id(root), 0) + 1
             refinements += 1
             c.refinements += 1
@@ -680,7 +719,7 @@ def _bottom_tier(planner: GraspPlanner, path: PosePath, l_max: int, c: _Counters
         # another pose path.
         root = _root(seg)
         if seg.refinable and per_root.get(id(root), 0) < l_max:
-            segments[k:k + 1] = list(seg.split(_rest_cut(seg)))
+            segments[k:k + 1] = list(_split(seg, _rest_cut(seg)))
             per_root[id(root)] = per_root.get(id(root), 0) + 1
             refinements += 1
             c.refinements += 1
@@ -706,12 +745,48 @@ def _window_before(segments: Sequence[Segment], k: int, per_root: dict[int, int]
 _RESTS: "weakref.WeakKeyDictionary[Segment, np.ndarray]" = weakref.WeakKeyDictionary()
 
 
-def _window_cut(seg: Segment) -> int | None:
+def _window_cut(seg: Segment) -> int | float | None:
     """The middle of the longest run of samples of ``seg`` at which the object rests on
     the environment alone (``REST_FRICTION``) that touches neither end of it (a run at
-    an end is a layer of the grasp graph already); ``None`` if there is none."""
+    an end is a layer of the grasp graph already); when the samples step over every
+    window, or the longest holds fewer than ``NARROW_RUN`` samples, the middle of one
+    found on a finer grid (:func:`_fine_window`, a parameter value); ``None`` if there
+    is none."""
     n = seg.poses.shape[0]
-    return _middle_of_longest([(a, b) for a, b in _rest_runs(seg) if a > 0 and b < n])
+    return _robust(seg, [(a, b) for a, b in _rest_runs(seg) if a > 0 and b < n])
+
+
+#: A rest window can be narrower than the samples' spacing (the 70 x 150 block standing
+#: up into the slot's corner rests alone only between 24.5 and 25.0 degrees at 0.8 of
+#: mu_e = 0.03, its samples are 0.68 degrees apart): the statics are also evaluated on
+#: a grid this many times finer (vertex motion at most WAYPOINT_STEP / REST_SUBSTEPS).
+REST_SUBSTEPS = 10
+_FINE: "weakref.WeakKeyDictionary[Segment, float | None]" = weakref.WeakKeyDictionary()
+
+
+def _fine_window(seg: Segment) -> float | None:
+    """The parameter value in the middle of the longest run of rest poses (as
+    :func:`_rest_runs`) on a grid ``REST_SUBSTEPS`` times finer than the segment's
+    samples that lies strictly inside the segment; ``None`` if there is none. Computed
+    once per segment."""
+    if seg in _FINE:
+        return _FINE[seg]
+    out: float | None = None
+    if seg.refinable:
+        values = dense_parameters(seg.world, seg.motion, seg.s0, seg.s1, WAYPOINT_STEP / REST_SUBSTEPS)
+        if values.size >= 3:
+            rests = rests_alone(seg.world, seg.motion.poses(values), REST_FRICTION)
+            edges = np.diff(np.concatenate([[0], rests.astype(np.int8), [0]]))
+            runs = [(int(a), int(b)) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))
+                    if a > 0 and b < values.size]
+            if runs:
+                a, b = max(runs, key=lambda r: r[1] - r[0])
+                value = float(values[(a + b - 1) // 2])
+                lo, hi = sorted((seg.s0, seg.s1))
+                if lo < value < hi:
+                    out = value
+    _FINE[seg] = out
+    return out
 
 
 def _rest_runs(seg: Segment) -> list[tuple[int, int]]:

@@ -184,14 +184,18 @@ class _Swept:
     def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
                start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment | tuple[Segment, ...]]:
         scored: list[tuple[float, float, Segment | tuple[Segment, ...]]] = []
+        far: list[tuple[float, float, Segment | tuple[Segment, ...]]] = []  # the intervals' far ends
         families = list(self.families(ctx, start_pose))
         sweeps = _stream_sweeps(ctx, [(motion, s_max) for motion, s_max, _ in families])
         nodes = ctx.state_set
         for (motion, s_max, params), sw in zip(families, sweeps):
-            for s_end in _end_values(ctx, sw, from_state, to_state, rng):
+            ends = _end_values(ctx, sw, from_state, to_state, rng)
+            for i, s_end in enumerate(ends):
                 seg = self._segment(ctx, motion, s_end, from_state, to_state, params)
                 score = float(ctx.goal_distance(seg.poses[-1:])[0])
                 scored.append((score, float(rng.random()), seg))  # ties broken at random
+                if i == 0 and len(ends) > 1:  # _end_values lists the far end first
+                    far.append(scored[-1])
             transit = _transit(sw, nodes)
             if transit is None or transit[0] != from_state:
                 continue
@@ -215,8 +219,20 @@ class _Swept:
                     score = float(ctx.goal_distance(second.poses[-1:])[0])
                     scored.append((score, float(rng.random()), (first, second)))
         scored.sort(key=lambda t: (t[0], t[1]))
-        for _, _, seg in scored[:limit]:
+        chosen = scored[:limit]
+        if self.keep_far_end and limit >= 2 and far and not any(c in far for c in chosen):
+            # The goal-ranked samples may all stop short of where the motion completes:
+            # standing a lying block up into a corner (gen_slot_corner_start) ends
+            # upside down, the farthest of the interval from the goal's orientation, and
+            # only from there can it be lifted and turned in the air. The best-ranked far
+            # end takes the last place.
+            chosen = chosen[:-1] + [min(far, key=lambda t: (t[0], t[1]))]
+        for _, _, seg in chosen:
             yield seg
+
+    #: Whether the stream keeps the best-ranked far end of an interval among its samples
+    #: (:meth:`sample`).
+    keep_far_end = False
 
     def _segment(self, ctx: PlanningContext, motion: Motion, s_end: float, from_state: ContactState,
                  to_state: ContactState, params: dict[str, Any]) -> Segment:
@@ -401,6 +417,7 @@ class BiplanarSlide(_Swept):
     """Rotate the object while it slides on two environment features at once."""
 
     name = "biplanar-slide"
+    keep_far_end = True  # a slide on two features completes where it lands (a block stood up into a corner)
 
     def families(self, ctx: PlanningContext, pose: Pose) -> list[Family_]:
         world = ctx.world

@@ -216,3 +216,43 @@ def test_a_lone_finger_the_object_falls_away_from_carries_no_force() -> None:
     report = forward_check(read_plan_string(tip_plan(None)), open_table)
     assert not report.ok and report.waypoint == 0
     assert "falls away from the one finger" in report.reason
+
+
+def test_a_refused_press_is_raised_along_the_ladder(scenario) -> None:
+    """When a judge downstream refuses a pressed step (the simulation: a 2 W press into a
+    block held by a wall is a guarded move of a fraction of a millimetre, which the
+    object's first lag undoes), the grasp is given the ladder's next press that still
+    passes every press test along the segment, before it leaves G_m; past the top of the
+    ladder there is none, and a grasp with no press gets none."""
+    from geometry.contacts import contact_state
+    from geometry.grasps import PRESS_LADDER, GraspOptions, enumerate_grasps, press_forces
+    from geometry.kinematics import translate
+    from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner
+    from ldhp_tamp.path import Segment
+
+    w = scenario.world
+    grasps = enumerate_grasps(w, GraspOptions(samples_per_edge=20))
+    planner = GraspPlanner(w, grasps, (), options=GraspGraphOptions(helper=False))
+    state = contact_state(w, scenario.start)
+    seg = Segment("push", state, state, translate(scenario.start, (1.0, 0.0)), 0.0, 30.0, w)
+    mg, _, _ = planner.motion_grasps(seg)
+    assert mg.press is not None
+    pressed = mg.indices[np.isfinite(mg.press)]
+    assert pressed.size
+    g = int(pressed[0])
+    first = mg.press_of(g)
+    assert first is not None
+    got = [first]
+    while (f := planner.raise_press(seg, g)) is not None:
+        assert f > got[-1]
+        got.append(f)
+        now, _, _ = planner.motion_grasps(seg)
+        assert now.press_of(g) == f  # the cached G_m carries it, so the next plan's step asks for it
+    ladder = [x * WEIGHT for x in PRESS_LADDER]
+    assert all(any(abs(f - x) < 1e-9 for x in ladder) for f in got) and got[-1] <= ladder[-1] + 1e-9
+    for f in got[1:]:  # each raise is what the press tests give from there on up
+        higher = tuple(x for x in PRESS_LADDER if x * WEIGHT >= f - 1e-9)
+        assert press_forces(w, grasps, seg.poses, np.array([g]), ladder=higher)[0] == f
+    unpressed = mg.indices[~np.isfinite(mg.press)]
+    if unpressed.size:
+        assert planner.raise_press(seg, int(unpressed[0])) is None

@@ -380,3 +380,40 @@ def test_start_grasp_any_starts_from_a_grasp_that_holds_the_object() -> None:
     first = plan.steps[0].waypoints[0]
     assert all(c is not None for c in first.finger_contacts)  # held by a pinch from the start
     assert plan.steps[0].primitive == "air-move"
+
+
+def test_a_rest_window_narrower_than_the_samples_is_found_between_them() -> None:
+    """Standing the 70 x 150 block up into the slot's corner (v1 on the floor, v2 on the
+    wall, mu_e = 0.03), it rests alone only where its centre of mass is just over v1:
+    between about 24.5 and 25.0 degrees at 0.8 of mu_e. The slide's samples are 0.69
+    degrees apart and can step over that window (they do from 90 to 1 degree); the cut is found between them, a parameter
+    value, and both halves start and end exactly there."""
+    import math
+
+    from geometry.contacts import contact_state, rests_alone
+    from geometry.features import Contact, ContactKind
+    from geometry.kinematics import two_contact
+    from geometry.poses import Pose
+    from ldhp_tamp.path import Segment
+    from ldhp_tamp.tamp import REST_FRICTION, _rest_cut, _rest_runs, _window_cut
+
+    sc = load_scenario(scenarios_dir() / "inv_slot_extract.toml")
+    w = sc.world
+    start = Pose(300.0, 0.0, math.radians(90.0))  # lying, its end face l1 flush on the right wall
+    kept = (Contact(ContactKind.VERTEX_EDGE, 0, 0), Contact(ContactKind.VERTEX_EDGE, 1, 7))  # v1-e1, v2-e8
+    motion = two_contact(w, start, kept, -1)
+    seg = Segment("biplanar-slide", contact_state(w, start), contact_state(w, start), motion, 0.0,
+                  math.radians(89.0), w)  # to 1 degree: samples at 25.15 and 24.46 degrees
+    assert abs(math.degrees(seg.poses[-1][2]) - 1.0) < 1e-6
+    assert not any(a > 0 and b < seg.poses.shape[0] for a, b in _rest_runs(seg))  # the samples miss it
+    cut = _window_cut(seg)
+    assert isinstance(cut, float) and _rest_cut(seg) == cut
+    at = motion.poses([cut])
+    assert 24.4 < math.degrees(at[0, 2]) < 25.0 and rests_alone(w, at, REST_FRICTION)[0]
+    a, b = seg.split(value=cut)
+    assert np.allclose(a.poses[-1], at[0]) and np.allclose(b.poses[0], at[0])
+    assert a.parent is seg and b.parent is seg and a.depth == b.depth == 1
+    assert a.to_state == b.from_state
+    assert _window_cut(a) is None and _window_cut(b) is None  # the window now ends both halves
+    with pytest.raises(ValueError):
+        seg.split(value=seg.s1 + 0.1)

@@ -59,3 +59,22 @@ def test_a_ladder_slide_ends_lying_flat_where_the_state_holds() -> None:
         assert abs(seg.end.theta - math.pi / 2) < 1e-3
     pushes = list(Push().sample(ctx, flat, s["l4-e1"], segs[0].end, np.random.default_rng(0), 5))
     assert pushes
+
+
+def test_a_stand_up_slide_is_streamed_to_where_it_completes() -> None:
+    """The block lying against the slot's left wall stands up into the corner by a
+    biplanar slide (v4 on the floor, v3 down the wall) that ends upside down, 180 degrees
+    from the goal's orientation: ranked by the distance to T'_g its far end comes last,
+    yet it is among the three samples tried (a biplanar slide keeps the best far end),
+    next to the best-ranked ones."""
+    sc = load_scenario(SCENARIOS / "gen_slot_corner_start.toml")
+    ctx = build_context(sc.world, sc.start, sc.goal, stream_samples=3)
+    s = {x.name: x for x in ctx.states}
+    lying, standing = s["l4-e1+l3-e2"], s["v4-e1+v3-e2"]
+    samples = list(BiplanarSlide().sample(ctx, lying, standing, sc.start, np.random.default_rng(0), 3))
+    assert len(samples) == 3 and all(contact_state(ctx.world, x.end) == standing for x in samples)
+    angles = sorted(math.degrees(x.end.theta) % 360.0 for x in samples)
+    assert 179.0 < angles[-1] < 180.0  # stood up, 2 mm of vertex motion short of flat on its end
+    assert angles[0] < 100.0  # the goal-ranked ones stay
+    unranked = list(BiplanarSlide().sample(ctx, lying, standing, sc.start, np.random.default_rng(0), 30))
+    assert len(unranked) > 3  # there are more, ranked before the far end
