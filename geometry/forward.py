@@ -41,6 +41,7 @@ present, at most :data:`MAX_CONTACTS`).
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,7 +51,8 @@ from geometry import mechanics
 from geometry.errors import GeometryError
 from geometry.poses import BoolArray, FloatArray, IntArray, wrap_angle
 
-__all__ = ["MAX_CONTACTS", "ForwardCheck", "alternative_motions", "screw_velocity"]
+__all__ = ["MAX_CONTACTS", "ForwardCheck", "alternative_motions", "falling_accelerations", "gyration_sq",
+           "screw_velocity"]
 
 #: Contacts per waypoint the enumeration takes (3^6 = 729 assignments).
 MAX_CONTACTS = 6
@@ -296,6 +298,22 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
     return ForwardCheck(ambiguous, found_twist, found_modes)
 
 
+def gyration_sq(vertices: ArrayLike, com: ArrayLike) -> float:
+    """A uniform polygon's radius of gyration squared about ``com`` (mm^2): the
+    ``gyration_sq`` :func:`falling_accelerations` takes.
+
+    >>> round(gyration_sq([[0, 0], [80, 0], [80, 40], [0, 40]], [40, 20]), 6) == round((80 ** 2 + 40 ** 2) / 12, 6)
+    True
+    """
+    v = np.asarray(vertices, dtype=float) - np.asarray(com, dtype=float)
+    w = np.roll(v, -1, axis=0)
+    cross = v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]
+    area = cross.sum() / 2.0
+    polar = np.sum(cross * (v[:, 0] ** 2 + v[:, 0] * w[:, 0] + w[:, 0] ** 2
+                            + v[:, 1] ** 2 + v[:, 1] * w[:, 1] + w[:, 1] ** 2)) / 12.0
+    return float(abs(polar / area))
+
+
 def falling_accelerations(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, present: ArrayLike,
                           com: ArrayLike, gyration_sq: float, probe_points: ArrayLike, probe_normals: ArrayLike,
                           *, tol: float = 1e-6) -> tuple[BoolArray, BoolArray]:
@@ -357,7 +375,12 @@ def falling_accelerations(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, 
     tk = lambda a: np.take_along_axis(a, order[..., None] if a.ndim == 3 else order, axis=1)  # noqa: E731
     p, n, m, live = tk(p), tk(n), tk(m), tk(live)
     t = np.stack([-n[..., 1], n[..., 0]], axis=-1)
-    d = p - cm[:, None, :]
+    # lengths in units of the radius of gyration (alpha then in 1 / that unit): the
+    # systems are dimensionless, so the determinant test below is scale-free (in mm, a
+    # 70 x 150 block's k^2 = 2283 made a well-posed sticking pivot look singular)
+    unit = math.sqrt(k2) if k2 > 0.0 else 1.0
+    k2 = 1.0 if k2 > 0.0 else 0.0
+    d = (p - cm[:, None, :]) / unit
     falls = np.zeros(b, dtype=bool)
     onto = np.zeros(b, dtype=bool)
     count = live.sum(axis=1)
@@ -435,7 +458,7 @@ def falling_accelerations(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, 
                 continue
             g = rows[good]
             falls[g] = True
-            dp = pp[g] - cm[g]
+            dp = (pp[g] - cm[g]) / unit
             ap = acc[good, :2] + acc[good, 2:3] * np.stack([-dp[:, 1], dp[:, 0]], axis=-1)
             onto[g] |= (ap * pn[g]).sum(axis=1) < -tol
     return falls, onto

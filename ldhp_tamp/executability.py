@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geometry import collision, mechanics
-from geometry.forward import MAX_CONTACTS, alternative_motions, falling_accelerations, screw_velocity
+from geometry.forward import MAX_CONTACTS, alternative_motions, falling_accelerations, gyration_sq, screw_velocity
 # How far ahead (finger travel, mm; and waypoints) the fingers must push into an object
 # that stays put for a planned object motion to be forced (:func:`_object_may_stay`):
 # the bottom tier's G_m makes the same test at a segment's start, with the same bounds.
@@ -142,13 +142,7 @@ def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: Float
 
 def _gyration_sq(world: World) -> float:
     """The object's radius of gyration squared about its COM (mm^2), uniform density."""
-    v = world.object.polygon.vertices - world.object.com
-    w = np.roll(v, -1, axis=0)
-    cross = v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]
-    area = cross.sum() / 2.0
-    polar = np.sum(cross * (v[:, 0] ** 2 + v[:, 0] * w[:, 0] + w[:, 0] ** 2
-                            + v[:, 1] ** 2 + v[:, 1] * w[:, 1] + w[:, 1] ** 2)) / 12.0
-    return float(abs(polar / area))
+    return gyration_sq(world.object.polygon.vertices, world.object.com)
 
 
 def _falls_off_the_finger(world: World, flat: PlanArrays, c: PlanContacts, com: FloatArray, rows: IntArray

@@ -109,3 +109,29 @@ def test_a_block_on_its_corner_falls_back_away_from_its_top_and_onto_its_far_sid
     flat_falls, _ = falling_accelerations([[[0.0, 0.0], [100.0, 0.0]]], [[[0.0, 1.0], [0.0, 1.0]]], [[0.5, 0.5]],
                                           [[True, True]], [[50.0, 35.0]], k2, [[50.0, 70.0]], [[0.0, -1.0]])
     assert not flat_falls[0]
+
+
+@pytest.mark.parametrize("scale", [0.1, 1.0, 10.0])
+def test_a_tall_block_falling_back_about_a_sticking_corner_is_found_at_every_scale(scale: float) -> None:
+    """The 70 x 150 block tilted 10 degrees clockwise on its bottom-right corner (mu 0.5)
+    falls back with the corner sticking (it needs 0.32 of friction there). In mm its
+    k^2 = 2283, and the determinant of that assignment's system, tested against the
+    largest entry to the fifth power, looked singular: the fall went unseen, and a finger
+    on the top was never found to be one the block falls away from. The answer cannot
+    depend on the unit of length."""
+    from geometry.forward import falling_accelerations, gyration_sq
+
+    th = np.radians(-10.0)
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    block = np.array([[0.0, 0.0], [70.0, 0.0], [70.0, 150.0], [0.0, 150.0]]) - [70.0, 0.0]
+    com = R @ [-35.0, 75.0] * scale
+    k2 = gyration_sq(block * scale, [-35.0 * scale, 75.0 * scale])
+    assert k2 == pytest.approx((70.0 ** 2 + 150.0 ** 2) / 12.0 * scale ** 2)
+    probes = {"top": ([-20.0, 150.0], [0.0, -1.0]), "left": ([-70.0, 20.0], [1.0, 0.0])}
+    onto = {}
+    for name, (p, n) in probes.items():
+        falls, on = falling_accelerations([[[0.0, 0.0]]], [[[0.0, 1.0]]], [[0.5]], [[True]], [com], k2,
+                                          [R @ p * scale], [R @ n])
+        assert falls[0]
+        onto[name] = bool(on[0])
+    assert onto == {"top": False, "left": True}
