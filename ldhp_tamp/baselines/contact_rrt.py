@@ -61,7 +61,6 @@ from geometry.features import Contact, ContactKind
 from geometry.grasps import NO_CONTACT, GraspOptions, MotionCheckOptions, enumerate_grasps, motion_conditioned, pose_conditioned
 from geometry.kinematics import Motion, MotionKind, rotate_about, sweep, translate, two_contact
 from geometry.poses import FloatArray, IntArray, Pose, wrap_angle
-from geometry.tolerances import PENETRATION_TOL
 from geometry.world import World
 from ldhp_tamp import budget
 from ldhp_tamp.budget import Budget
