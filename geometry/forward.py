@@ -50,6 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 from geometry import mechanics
 from geometry.errors import GeometryError
 from geometry.poses import BoolArray, FloatArray, IntArray, wrap_angle
+from geometry.shapes import polar_moment, signed_area
 
 __all__ = ["MAX_CONTACTS", "ForwardCheck", "alternative_motions", "falling_accelerations", "gyration_sq",
            "screw_velocity"]
@@ -305,13 +306,8 @@ def gyration_sq(vertices: ArrayLike, com: ArrayLike) -> float:
     >>> round(gyration_sq([[0, 0], [80, 0], [80, 40], [0, 40]], [40, 20]), 6) == round((80 ** 2 + 40 ** 2) / 12, 6)
     True
     """
-    v = np.asarray(vertices, dtype=float) - np.asarray(com, dtype=float)
-    w = np.roll(v, -1, axis=0)
-    cross = v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]
-    area = cross.sum() / 2.0
-    polar = np.sum(cross * (v[:, 0] ** 2 + v[:, 0] * w[:, 0] + w[:, 0] ** 2
-                            + v[:, 1] ** 2 + v[:, 1] * w[:, 1] + w[:, 1] ** 2)) / 12.0
-    return float(abs(polar / area))
+    v = np.asarray(vertices, dtype=float)
+    return polar_moment(v, com) / abs(signed_area(v))
 
 
 def falling_accelerations(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, present: ArrayLike,

@@ -1537,8 +1537,8 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
 
     (2) the object cannot stay where it is at the first sample: its environment contacts
         (full cones) do not balance the weight and the finger sliding over it, its force
-        ``f`` along the normal and ``mu f`` along the finger's motion (a cone test with
-        that known wrench moved to the target);
+        ``f`` along the normal and ``mu f`` along the finger's motion
+        (:func:`geometry.mechanics.pressed_feasible`: one cone test, the force known);
     (3) the forward problem (:func:`geometry.forward.alternative_motions`, the finger
         pressed) has no other object motion at :data:`PRESS_FORWARD_SAMPLES` samples,
         the first among them;
@@ -1565,34 +1565,26 @@ def press_forces(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLik
     c = env.points.shape[1]
     # (2) the object staying: the finger's velocity over the first motion, its slip against the object
     _, start, com0 = _instances(world, grasps, r, p, env, np.array([0]))
-    q = np.nan_to_num(grasps.contact[r])  # object frame (A, 2, 2)
-    c1, s1 = np.cos(p[1, 2]), np.sin(p[1, 2])
-    at1 = np.stack([c1 * q[..., 0] - s1 * q[..., 1] + p[1, 0], s1 * q[..., 0] + c1 * q[..., 1] + p[1, 1]], axis=-1)
     a_ = np.arange(r.size)
-    moved = at1[a_, finger] - start.points[a_, c + finger]  # (A, 2)
+    q = np.nan_to_num(grasps.contact[r, finger])  # the finger's contact, object frame (A, 2)
+    moved = transform_points(p[1:2], q)[0] - start.points[a_, c + finger]  # (A, 2)
     nrm = start.normals[a_, c + finger]
     tang = np.stack([-nrm[:, 1], nrm[:, 0]], axis=-1)
     own = (moved * tang).sum(axis=-1)  # the finger's tangential motion
     todo = np.flatnonzero(one & (np.abs(own) > 1e-9))
-    # staying, the environment keeps full cones and the finger's force is known: its
-    # normal f and its friction mu f against its motion over the object (a cone test)
-    env_only = mechanics.Contacts.trusted(start.points[:, :c], start.normals[:, :c], start.mu[:, :c],
-                                          np.where(start.modes[:, :c] == mechanics.ContactMode.ABSENT,
-                                                   mechanics.ContactMode.ABSENT,
-                                                   mechanics.ContactMode.STICKING).astype(np.int8))
-    gens, _ = mechanics.wrench_generators(env_only, com0, length)
-    mu_f = start.mu[a_, c + finger]
-    # per newton of press, the finger's force on the object: friction drags it along the finger's motion
-    unit = nrm + (mu_f * np.sign(own))[:, None] * tang
-    arm = start.points[a_, c + finger] - com0
-    moment = (arm[:, 0] * unit[:, 1] - arm[:, 1] * unit[:, 0]) / length
-    unit_wrench = np.column_stack([unit, moment]) / weight
-    ey = np.array([0.0, 1.0, 0.0])
+    # staying, the environment keeps full cones and the finger slides over the object
+    # (the object's slip against it opposes the finger's motion): its force is known
+    modes = np.where(start.modes == mechanics.ContactMode.ABSENT, mechanics.ContactMode.ABSENT,
+                     mechanics.ContactMode.STICKING).astype(np.int8)
+    modes[a_, c + finger] = mechanics.ContactMode.SLIDING
+    sdir = np.zeros(start.points.shape)
+    sdir[a_, c + finger] = -np.sign(own)[:, None] * tang
+    stay = mechanics.Contacts.trusted(start.points, start.normals, start.mu, modes, sdir)
     order = _spread_order(p.shape[0])
     for f in forces:
         if not todo.size:
             break
-        stays = mechanics.cone_contains(gens[todo], ey[None, :] - f * unit_wrench[todo], 0.0)
+        stays = mechanics.pressed_feasible(stay.select(todo), com0[todo], length, c + finger[todo], f / weight)
         alive = todo[~stays]
         if alive.size:  # (3) no other motion under the press, where the motion starts
             alive = alive[~_press_alternatives(world, grasps, p, r[alive], finger[alive], env, f)]

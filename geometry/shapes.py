@@ -114,6 +114,19 @@ class Polygon:
         return np.stack([c * v[:, 0] - s * v[:, 1] + x, s * v[:, 0] + c * v[:, 1] + y], axis=1)
 
 
+def polar_moment(vertices: ArrayLike, about: ArrayLike) -> float:
+    """Polar second moment of area (mm^4) of a simple polygon about a point.
+
+    >>> round(polar_moment([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]], [1.0, 1.0]), 6)
+    2.666667
+    """
+    v = np.asarray(vertices, dtype=float) - np.asarray(about, dtype=float)
+    w = np.roll(v, -1, axis=0)
+    cross = v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]
+    return float(abs(np.sum(cross * (v[:, 0] ** 2 + v[:, 0] * w[:, 0] + w[:, 0] ** 2
+                                     + v[:, 1] ** 2 + v[:, 1] * w[:, 1] + w[:, 1] ** 2)) / 12.0))
+
+
 def segment_distances(points: ArrayLike, segments: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Distances from points (..., 2) to closed segments (S, 2, 2), and where they fall.
 

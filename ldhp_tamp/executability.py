@@ -85,15 +85,16 @@ def _describe(labels: tuple[str, ...], modes: np.ndarray, twist: FloatArray) -> 
             f"{turn:.2f} deg ({', '.join(what) or 'every contact lets go'}), a motion that balances too")
 
 
-def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: FloatArray, squeeze: BoolArray
+def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: FloatArray, held: BoolArray
                      ) -> BoolArray:
     """Waypoints i (before the last) of MoveObject motions at which the object may simply
     stay: it rests on the environment alone there (full cones, no finger), and over the
     next waypoints of the step, up to :data:`STAY_TRAVEL` of gripper travel, no finger
     penetrates the object held at pose i by more than ``PENETRATION_TOL`` (finite
     motions: a round finger that grazes a corner rolls over it, which the first-order
-    enumeration does not see). A squeezing pinch (``squeeze``) carries the object by its
-    grip force and is not asked."""
+    enumeration does not see). Waypoints ``held`` are not asked: a squeezing pinch carries
+    the object by its grip force, and a pressed finger's friction is the enumeration's to
+    decide (the object staying while it slides is one of its assignments)."""
     n = len(flat)
     rows = np.arange(n - 1)
     moves = ((np.abs(flat.obj[rows + 1, :2] - flat.obj[rows, :2]).max(axis=1) > _STILL)
@@ -103,7 +104,7 @@ def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: Float
     if not moves.any():
         return out
     env = c.on & (c.finger < 0)[None, :]
-    cand = np.flatnonzero(moves & env.any(axis=1) & ~squeeze[rows])
+    cand = np.flatnonzero(moves & env.any(axis=1) & ~held[rows])
     if cand.size == 0:
         return out
     # rests alone at pose i: the environment contacts present, full cones
@@ -140,11 +141,6 @@ def _object_may_stay(world: World, flat: PlanArrays, c: PlanContacts, com: Float
     return out
 
 
-def _gyration_sq(world: World) -> float:
-    """The object's radius of gyration squared about its COM (mm^2), uniform density."""
-    return gyration_sq(world.object.polygon.vertices, world.object.com)
-
-
 def _falls_off_the_finger(world: World, flat: PlanArrays, c: PlanContacts, com: FloatArray, rows: IntArray
                           ) -> BoolArray:
     """(len(rows),) of waypoints ``rows`` (one finger touching, no press), whether the
@@ -162,7 +158,7 @@ def _falls_off_the_finger(world: World, flat: PlanArrays, c: PlanContacts, com: 
     fcol = np.argmax(fin, axis=1)
     probe_p = c.points[rows, fcol]
     probe_n = c.normals[rows, fcol]
-    k2 = _gyration_sq(world)
+    k2 = gyration_sq(world.object.polygon.vertices, world.object.com)
     cand = np.flatnonzero(env.any(axis=1))
     rest = np.zeros(rows.size, dtype=bool)
     for grp in present_groups(env[cand]):
@@ -253,8 +249,7 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
             if first is None or i < first[0]:
                 labels = tuple(c.labels[k] for k in cols[j])
                 first = (i, _describe(labels, res.modes[j], res.twist[j]))
-    stays = _object_may_stay(world, flat, c, com0, squeeze)
-    stays[rows[pressed_rows]] = False  # a pressed finger's friction: the enumeration decides
+    stays = _object_may_stay(world, flat, c, com0, squeeze | pressed_rows)
     # one finger, not pressed, on an object the environment alone does not hold: it carries
     # force only where the object leans on it
     one_finger = (f1.any(axis=1) ^ f2.any(axis=1)) & moving & ~pressed_rows & (flat.step[nxt] == flat.step[rows])

@@ -41,7 +41,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from geometry.poses import Pose
-from geometry.shapes import FloatArray, signed_area
+from geometry.shapes import FloatArray, polar_moment, signed_area
 from geometry.world import PolylineGripper, TwoPointGripper, World
 
 __all__ = [
@@ -265,12 +265,7 @@ def planar_inertia(vertices: FloatArray, about: FloatArray) -> float:
     >>> round(planar_inertia(np.array([[0., 0.], [2., 0.], [2., 2.], [0., 2.]]), np.array([1., 1.])), 6)
     2.666667
     """
-    v = np.asarray(vertices, dtype=float) - np.asarray(about, dtype=float)
-    w = np.roll(v, -1, axis=0)
-    cross = v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]
-    ixx = np.sum(cross * (v[:, 1] ** 2 + v[:, 1] * w[:, 1] + w[:, 1] ** 2)) / 12.0
-    iyy = np.sum(cross * (v[:, 0] ** 2 + v[:, 0] * w[:, 0] + w[:, 0] ** 2)) / 12.0
-    return float(abs(ixx + iyy))
+    return polar_moment(vertices, about)
 
 
 # --------------------------------------------------------------------------------------

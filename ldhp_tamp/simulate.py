@@ -30,7 +30,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from geometry.poses import FloatArray, Pose, wrap_angle
+from geometry.poses import FloatArray, Pose, rotation, wrap_angle
+from geometry.shapes import segment_distances
 from geometry.world import PolylineGripper, TwoPointGripper, World
 from ldhp_tamp.errors import InputError
 from ldhp_tamp.files import write_bytes_atomic, write_text_atomic
@@ -356,7 +357,7 @@ class _Runner:
         ``force``; returns the offset (mm) and the force reached (N)."""
         o = self.options
         step_mm = o.press_speed_mm_s * self.dt
-        world_dir = _rotate(direction, float(hand[2]))
+        world_dir = rotation(float(hand[2])) @ direction
         delta = 0.0
         reached = self.finger_force(finger)
         while reached < force and delta < o.press_limit_mm:
@@ -435,11 +436,6 @@ class _Runner:
         return bool(np.all(np.isfinite(self.data.qpos)))
 
 
-def _rotate(v: FloatArray, theta: float) -> FloatArray:
-    c, s = math.cos(theta), math.sin(theta)
-    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
-
-
 def _press_direction(world: World, step: Any, finger: int) -> FloatArray | None:
     """The pressed finger's contact normal into the object at the step's first waypoint,
     in the gripper frame: the inward normal of the object edge nearest the declared
@@ -448,14 +444,11 @@ def _press_direction(world: World, step: Any, finger: int) -> FloatArray | None:
     point = w.finger_contacts[finger]
     if point is None:
         return None
-    verts = w.object.apply(world.object.polygon.vertices)
-    a, b = verts, np.roll(verts, -1, axis=0)
-    ab = b - a
-    t = np.clip(((np.asarray(point) - a) * ab).sum(axis=1) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0.0, 1.0)
-    dist = np.linalg.norm(a + t[:, None] * ab - np.asarray(point), axis=1)
-    e = int(np.argmin(dist))
-    inward = np.array([-ab[e, 1], ab[e, 0]]) / max(float(np.linalg.norm(ab[e])), 1e-12)  # left of a CCW edge
-    return _rotate(inward, -w.gripper.theta)
+    poly = world.object.polygon
+    edges = np.stack([poly.vertices, np.roll(poly.vertices, -1, axis=0)], axis=1)
+    dist, _ = segment_distances(w.object.inverse().apply(np.asarray(point, dtype=float)[None])[0], edges)
+    inward = -poly.normals[int(np.argmin(dist))]  # object frame
+    return rotation(w.object.theta - w.gripper.theta) @ inward
 
 
 def _errors(planned: Pose, simulated: tuple[float, float, float]) -> tuple[float, float]:
@@ -587,7 +580,7 @@ def simulate_plan(plan: Plan, scenario: Scenario, options: SimOptions = SimOptio
         if offset > 0.0 and run.finite():  # the press taken back, at the press's speed
             assert press_dir is not None
             back = np.linspace(offset, 0.0, max(2, int(math.ceil(offset / (options.press_speed_mm_s * dt)))))
-            wd = _rotate(press_dir, float(cmd.hand[last, 2]))
+            wd = rotation(float(cmd.hand[last, 2])) @ press_dir
             hand = np.repeat(cmd.hand[last][None, :], back.size, axis=0)
             hand[:, 0] += wd[0] * back * MM
             hand[:, 1] += wd[1] * back * MM

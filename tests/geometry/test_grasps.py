@@ -411,6 +411,20 @@ def candidates(world: World, gs: GraspSet, path: np.ndarray) -> np.ndarray:
     return np.intersect1d(pose_conditioned(world, gs, path[0]), pose_conditioned(world, gs, path[-1]))
 
 
+def top_and_left_fingers(world: World, gs: GraspSet, path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of the 70 x 150 block's candidate grasps along ``path``: the one-finger ones, those
+    on its top face away from its corners, and those high on its left side."""
+    cand = candidates(world, gs, path)
+    one = cand[gs.n_touching[cand] == 1]
+    f = np.where(gs.touching[one, 0], 0, 1)
+    y = gs.contact[one, f, 1]
+    x = gs.contact[one, f, 0]
+    top = one[(np.abs(y - 150.0) < 1e-6) & (x > 5.0) & (x < 65.0)]
+    left = one[(np.abs(x) < 1e-6) & (y > 100.0)]
+    assert top.size and left.size
+    return one, top, left
+
+
 @lru_cache(maxsize=None)
 def lift_world() -> tuple[World, GraspSet]:
     world = make_world(PolylineGripper(make_polygon(TASK2_FINGER), (0.0, 140.0)), mu_env=0.3, mu_grip=0.6)
@@ -745,14 +759,7 @@ def test_a_finger_that_would_rise_off_a_resting_block_starts_its_tip_only_presse
     the path as a whole: a part of it may admit them)."""
     world, gs = lift_world()
     path = tip_right(3.0)
-    cand = candidates(world, gs, path)
-    one = cand[gs.n_touching[cand] == 1]
-    f = np.where(gs.touching[one, 0], 0, 1)
-    y = gs.contact[one, f, 1]
-    x = gs.contact[one, f, 0]
-    top = one[(np.abs(y - 150.0) < 1e-6) & (x > 5.0) & (x < 65.0)]
-    left = one[(np.abs(x) < 1e-6) & (y > 100.0)]
-    assert top.size and left.size
+    one, top, left = top_and_left_fingers(world, gs, path)
     idle = grasps_module._leaves_it_still(world, gs, path, np.concatenate([top, left]))
     assert idle[:top.size].mean() > 0.9  # (a free finger swinging into the block presses too)
     assert not idle[top.size:].any()
@@ -783,14 +790,7 @@ def test_a_finger_dragging_the_top_of_a_tilted_block_continues_its_tip_only_pres
     world, gs = lift_world()
     phi = np.radians(np.arange(10.0, 13.0 + 1e-9, 0.5))
     path = np.stack([70.0 - 70.0 * np.cos(phi), 70.0 * np.sin(phi), -phi], axis=1)
-    cand = candidates(world, gs, path)
-    one = cand[gs.n_touching[cand] == 1]
-    f = np.where(gs.touching[one, 0], 0, 1)
-    y = gs.contact[one, f, 1]
-    x = gs.contact[one, f, 0]
-    top = one[(np.abs(y - 150.0) < 1e-6) & (x > 5.0) & (x < 65.0)]
-    left = one[(np.abs(x) < 1e-6) & (y > 100.0)]
-    assert top.size and left.size
+    one, top, left = top_and_left_fingers(world, gs, path)
     rows = np.concatenate([top, left])
     assert not grasps_module._leaves_it_still(world, gs, path, rows).any()
     env = grasps_module._env_contacts(world, path, CONTACT_TOL)
