@@ -41,7 +41,7 @@ from geometry.tolerances import PENETRATION_TOL
 from ldhp_tamp.plan import Plan
 from ldhp_tamp.scenario import Scenario
 from geometry.world import World
-from ldhp_tamp.validate import (PlanArrays, PlanContacts, PresentGroup, finger_offsets, plan_contacts,
+from ldhp_tamp.validate import (ROUNDING_SLACK, PlanArrays, PlanContacts, PresentGroup, finger_offsets, plan_contacts,
                                 present_groups, press_table, pressed_support, rotate_vectors)
 
 __all__ = ["ForwardReport", "forward_check", "SQUEEZE_COS"]
@@ -52,8 +52,10 @@ log = logging.getLogger(__name__)
 #: (they push against each other within 60 degrees).
 SQUEEZE_COS = -0.5
 
-#: Motions smaller than this (mm, and radians times the length scale) are no motion.
-_STILL = 1e-6
+#: Motions smaller than this (mm, and radians times the length scale) are no motion: the
+#: slack of numbers that went through a plan file rounded to 6 decimals (a finger that
+#: stays put in the planner's arrays moves by a few 1e-6 mm once written and read back).
+_STILL = ROUNDING_SLACK
 
 
 @dataclass(frozen=True)

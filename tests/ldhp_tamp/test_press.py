@@ -256,3 +256,21 @@ def test_a_refused_press_is_raised_along_the_ladder(scenario) -> None:
     unpressed = mg.indices[~np.isfinite(mg.press)]
     if unpressed.size:
         assert planner.raise_press(seg, int(unpressed[0])) is None
+
+
+def test_a_finger_still_but_for_the_files_rounding_is_still(scenario, monkeypatch) -> None:
+    """A plan file rounds to 6 decimals: a finger the planner kept put moves by a few
+    1e-6 mm once written and read back. That is no motion for the judge (the book
+    stand-up's plan was refused so after writing: an AdjustGrasp step whose kept finger
+    'moved' 1.2e-6 mm, against which an object motion of 1.5e-6 mm counted as another)."""
+    import ldhp_tamp.executability as executability
+
+    plan = json.loads(drag_plan({"finger": 0, "force_n": WEIGHT}, travel=4))
+    last = plan["steps"][0]["waypoints"][-1]
+    jitter = [dict(last, gripper=[last["gripper"][0] + 3e-6 * k, last["gripper"][1], 0]) for k in range(4)]
+    plan["steps"].append({"primitive": "slide", "family": "adjust-grasp", "parameters": {},
+                          "contact_state": {"from": "a", "to": "a"}, "waypoints": [last] + jitter})
+    text = json.dumps(plan)
+    assert forward_check(read_plan_string(text), scenario).ok
+    monkeypatch.setattr(executability, "_STILL", 1e-6)  # the old threshold, below the rounding
+    assert not forward_check(read_plan_string(text), scenario).ok
