@@ -150,10 +150,10 @@ def press_problem(step: "Step") -> str | None:
     if isinstance(finger, bool) or not isinstance(finger, int) or isinstance(force, bool) \
             or not isinstance(force, (int, float)):
         return 'expected {"finger": 0 or 1, "force_n": newtons}'
-    if finger not in (0, 1):
-        return f"finger must be 0 or 1, got {finger!r}"
-    if not (math.isfinite(force) and force > 0):
-        return f"force_n must be a positive number of newtons, got {force!r}"
+    try:
+        Press(finger, float(force))
+    except ValueError as exc:  # the value checks are the Press's own
+        return str(exc).removeprefix("press: ")
     return None
 
 
