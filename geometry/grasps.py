@@ -1369,9 +1369,10 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
                 break
         alive = check(alive, samples)
     alive = np.union1d(alive, check(known, again))
-    # One-finger grasps whose finger, moved by position control, would leave the object
-    # resting where it is make the motion only under a press (:func:`press_forces`);
-    # those no press of the ladder serves are rejected (for the path as a whole).
+    # Grasps held by position control (one finger, or two that do not squeeze) whose
+    # fingers would leave the object resting where it is make the motion only under a
+    # press (:func:`press_forces`, one-finger grasps); those no press of the ladder serves
+    # are rejected (for the path as a whole).
     press = None
     idle = _leaves_it_still(world, grasps, p, alive)
     if env is not None:
@@ -1429,6 +1430,26 @@ def within_force_limit(world: World, grasps: GraspSet, path: ArrayLike, rows: Ar
     return np.asarray(res.feasible, dtype=bool).reshape(r.size, samples.size).all(axis=1)
 
 
+#: Two finger contacts squeeze the object between them when their normals' dot product is
+#: at most this (they push against each other within 60 degrees): a gripper that closes
+#: under force holds it by its grip (``ldhp_tamp.executability``, the judge, uses the same).
+SQUEEZE_COS = -0.5
+
+
+def squeezing(world: World, grasps: GraspSet, rows: ArrayLike) -> BoolArray:
+    """(len(rows),) whether each grasp of ``rows`` is a pinch the gripper squeezes: both
+    fingers touch, their contact normals push against each other
+    (``n1 . n2 <= SQUEEZE_COS``) and the width can close under force (a fixed-width
+    gripper's rigid fingers squeeze nothing). Any other grasp is held where position
+    control puts it: its fingers carry force only where the motion pushes them into the
+    object."""
+    r = np.asarray(rows, dtype=np.int64).reshape(-1)
+    if world.gripper.fixed_width:
+        return np.zeros(r.size, dtype=bool)
+    n = grasps.normal[r]
+    return (grasps.n_touching[r] == 2) & (np.nan_to_num((n[:, 0] * n[:, 1]).sum(axis=-1), nan=1.0) <= SQUEEZE_COS)
+
+
 #: How far (mm of gripper travel) a one-finger grasp must push into an object resting on
 #: the environment alone at a segment's start for the motion to be forced, and the most
 #: samples looked at (the judge's "the object may stay", ldhp_tamp.executability).
@@ -1437,18 +1458,22 @@ STAY_SAMPLES = 8
 
 
 def _leaves_it_still(world: World, grasps: GraspSet, p: FloatArray, cand: IntArray) -> BoolArray:
-    """(len(cand),) the one-finger grasps of ``cand`` that cannot start the motion along
-    ``p``: the object rests on the environment alone at ``p[0]`` (full cones), and over
-    the next samples, up to :data:`STAY_TRAVEL` of gripper travel, the finger moving with
-    the planned motion never presses into the object left where it is (by more than
-    ``PENETRATION_TOL``). Position control moves the finger; the object may as well stay
-    and the finger leave it (a finger on a standing block's top face "tipping" it about
-    a bottom corner rises off it). Balancing forces along the path exist for such a grasp,
-    so the per-sample test alone admits it; the forward problem does not."""
+    """(len(cand),) the grasps of ``cand`` held by position control (one finger, or two
+    that do not squeeze: :func:`squeezing`) that cannot start the motion along ``p``: the
+    object rests on the environment alone at ``p[0]`` (full cones), and over the next
+    samples, up to :data:`STAY_TRAVEL` of gripper travel, no finger moving with the
+    planned motion presses into the object left where it is (by more than
+    ``PENETRATION_TOL``). Position control moves the fingers; the object may as well stay
+    and the fingers leave it (a finger on a standing block's top face "tipping" it about
+    a bottom corner rises off it; two fingers hugging a block's top corner, one on its
+    side and one on its top, "tip" it about the far bottom corner moving away from the
+    side and along the top). Balancing forces along the path exist for such a grasp, so
+    the per-sample test alone admits it; the forward problem (the judge's "the object may
+    stay", which asks every grasp but a squeezing pinch) does not."""
     out = np.zeros(cand.size, dtype=bool)
     if p.shape[0] < 2 or not cand.size:
         return out
-    one = np.flatnonzero(grasps.n_touching[cand] == 1)
+    one = np.flatnonzero(~squeezing(world, grasps, cand) & (grasps.n_touching[cand] >= 1))
     if not one.size or not contacts.rests_alone(world, p[:1])[0]:
         return out
     rows = cand[one]

@@ -35,6 +35,9 @@ from geometry.forward import MAX_CONTACTS, alternative_motions, falling_accelera
 # the bottom tier's G_m makes the same test at a segment's start, with the same bounds.
 from geometry.grasps import STAY_SAMPLES as _STAY_AHEAD
 from geometry.grasps import STAY_TRAVEL
+# Two finger contacts squeeze the object when their normals push against each other within
+# 60 degrees: one definition for the judge and the bottom tier's G_m (geometry.grasps.squeezing).
+from geometry.grasps import SQUEEZE_COS
 from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
 from geometry.shapes import FloatArray
 from geometry.tolerances import PENETRATION_TOL
@@ -48,9 +51,6 @@ __all__ = ["ForwardReport", "forward_check", "SQUEEZE_COS"]
 
 log = logging.getLogger(__name__)
 
-#: Two finger contacts squeeze the object when their normals' dot product is below this
-#: (they push against each other within 60 degrees).
-SQUEEZE_COS = -0.5
 
 #: Motions smaller than this (mm, and radians times the length scale) are no motion: the
 #: slack of numbers that went through a plan file rounded to 6 decimals (a finger that
