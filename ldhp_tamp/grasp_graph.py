@@ -870,6 +870,13 @@ class GraspPlanner:
         if node_path is None:
             reached = [int(np.isfinite(r).sum()) for r in reach]
             k = max((i for i, c in enumerate(reached) if c), default=0)
+            if exhausted:
+                # Nothing is decided: optimistic reachability counts the unchecked edges as
+                # feasible and may run on to the goal. The layer the search spent most of its
+                # checks at is where its cheap paths kept failing: blame the segment after it.
+                spent = _checks_by_layer(search)
+                if spent:
+                    k = max(spent, key=lambda j: (spent[j], j))
             failing = k if k < n else n - 1
             reason = self._failure_reason(segments, layers, inter, reached, k, search, exhausted)
             log.info("grasp graph: no path (%s)", reason)
@@ -1096,7 +1103,18 @@ class GraspPlanner:
                         reached: list[int], k: int, search: _Search, exhausted: bool) -> str:
         n = len(segments)
         layer = layers[k]
-        if k < n:
+        if exhausted:
+            spent = _checks_by_layer(search)
+            where = (f"undecided: the budget of {self.options.max_edge_checks} intra-pose edge checks ran out "
+                     f"({search.checked} checked, {spent.get(k, 0)} of them at T_{k}) before a grasp sequence of "
+                     f"checked edges got past T_{k}")
+            if k < n:
+                need = (f"the search was looking there for a way from the grasps that arrive to one of the "
+                        f"{int(np.isfinite(inter[k]).sum())} grasps that execute segment {k} ({_describe(segments[k])}) "
+                        f"within {self.options.max_intra_depth} AdjustGrasp edges")
+            else:
+                need = f"the search was looking there for a release within {self.options.max_intra_depth} AdjustGrasp edges"
+        elif k < n:
             where = f"forward reachability dies at segment {k} ({_describe(segments[k])})"
             need = (f"none of them is, or reaches within {self.options.max_intra_depth} feasible AdjustGrasp edges, "
                     f"one of the {int(np.isfinite(inter[k]).sum())} grasps that can execute it")
@@ -1114,9 +1132,16 @@ class GraspPlanner:
                f"the start (unchecked AdjustGrasp edges counted as feasible), {need}; {int(layer.intra.sum())} grasps hold the object still at T_{k}; the object "
                f"{'rests' if rests else 'does not rest'} on the environment alone there; AdjustGrasp edges at "
                f"T_{k}: " + ("; ".join(parts) if parts else "none (the domain declares no AdjustGrasp primitive)"))
-        if exhausted:
-            msg += f" (search stopped: the budget of {self.options.max_edge_checks} intra-pose edge checks ran out)"
         return msg
+
+
+def _checks_by_layer(search: _Search) -> Counter:
+    """How many intra-pose edges the search checked at each layer."""
+    spent: Counter = Counter()
+    for (layer, _), st in search.stats.items():
+        if st.get("checked"):
+            spent[layer] += st["checked"]
+    return spent
 
 
 def _stable_order(keys: IntArray, size: int) -> IntArray:

@@ -421,3 +421,23 @@ def test_an_adjust_grasp_edge_a_judge_refused_is_left_out_of_the_next_plan(pick:
     cands, j = first.adjust_edges[i]
     assert (id(cands), j) not in taken and cands.valid[j] == -1
     validate(pick, again.steps)
+
+
+def test_a_search_out_of_edge_checks_says_so_and_blames_where_it_spent_them(pick: Scenario, pick_grasps):
+    # The pick's lift with every approach refused when checked and a budget of a few edge
+    # checks: the search spends them on approaches at T_0 and stops undecided. Counting the
+    # unchecked approaches as feasible, reachability runs on to the goal (which asks for
+    # no release), so the last layer it reaches says nothing; the failure is at T_0, the
+    # segment after it is the one to blame, and the reason must not claim the goal is reached.
+    world = pick.world
+    path = PosePath((lift(world, pick.start, 100.0),))
+    veto = VetoApproach(set(range(len(pick_grasps))))
+    binds = [Binding(b.name, b.family, veto) if b.name == "approach-contact" else b for b in bindings()]
+    res = GraspPlanner(world, pick_grasps, binds, options=GraspGraphOptions(max_edge_checks=3)).plan(path)
+    assert res.status is GraspPlanStatus.NO_PATH, res.reason
+    assert veto.asked
+    assert res.failing_segment == 0 and not res.at_goal, res.reason
+    assert res.reason.startswith("no grasp sequence: undecided: the budget of 3 intra-pose edge checks ran out ")
+    assert f"{len(veto.asked)} of them at T_0" in res.reason
+    assert "goal pose is reached" not in res.reason
+    assert "approach-contact 0 feasible of" in res.reason
