@@ -1430,24 +1430,20 @@ def within_force_limit(world: World, grasps: GraspSet, path: ArrayLike, rows: Ar
     return np.asarray(res.feasible, dtype=bool).reshape(r.size, samples.size).all(axis=1)
 
 
-#: Two finger contacts squeeze the object between them when their normals' dot product is
-#: at most this (they push against each other within 60 degrees): a gripper that closes
-#: under force holds it by its grip (``ldhp_tamp.executability``, the judge, uses the same).
-SQUEEZE_COS = -0.5
-
-
 def squeezing(world: World, grasps: GraspSet, rows: ArrayLike) -> BoolArray:
     """(len(rows),) whether each grasp of ``rows`` is a pinch the gripper squeezes: both
-    fingers touch, their contact normals push against each other
-    (``n1 . n2 <= SQUEEZE_COS``) and the width can close under force (a fixed-width
-    gripper's rigid fingers squeeze nothing). Any other grasp is held where position
-    control puts it: its fingers carry force only where the motion pushes them into the
-    object."""
+    fingers touch and the width closes under force. The executor closes the gripper onto
+    the object until its force setting (the simulation's preload), so both fingers stay on
+    it whatever their normals: opposed, they hold it between them; on two faces of a
+    corner, the grip drags them along the faces towards it. The force it takes is not the
+    rigid model's to decide (``ldhp_tamp.executability`` leaves such waypoints to the
+    physics replay). A fixed-width gripper's rigid fingers squeeze nothing; a single
+    finger is held where position control puts it. Either carries force only where the
+    motion pushes the object onto it."""
     r = np.asarray(rows, dtype=np.int64).reshape(-1)
     if world.gripper.fixed_width:
         return np.zeros(r.size, dtype=bool)
-    n = grasps.normal[r]
-    return (grasps.n_touching[r] == 2) & (np.nan_to_num((n[:, 0] * n[:, 1]).sum(axis=-1), nan=1.0) <= SQUEEZE_COS)
+    return grasps.n_touching[r] == 2
 
 
 #: How far (mm of gripper travel) a one-finger grasp must push into an object resting on

@@ -10,12 +10,18 @@ the plan is not executable as written. :func:`forward_check` solves that quasi-s
 forward problem (:func:`geometry.forward.alternative_motions`) over the motion from each
 waypoint to the next, with the contacts rule 7 finds there.
 
-Two fingers of a gripper that closes under force and squeeze the object between them
-(their contact normals oppose each other) hold it as the grip force decides, which the
-force limit (rule 9) and the planner's friction margin govern: waypoints with such a pinch
-are not enumerated (the rigid model would call every pinch ambiguous, its squeeze being
-indeterminate). A fixed-width gripper's rigid fingers squeeze nothing: their waypoints
-are enumerated like any other.
+Two fingers of a gripper that closes under force squeeze the object between them: the
+executor closes the gripper until its force setting (the simulation's preload), so neither
+finger lets go, whatever their normals (opposed, they hold it between them; on two faces
+of a corner the grip drags them towards it). They hold it as the grip force decides,
+which the force limit (rule 9), the planner's friction margin and, with ``solve
+--simulate``, the physics replay govern: waypoints with such a pinch are not enumerated
+(the rigid model lets a finger leave the object, and would call every pinch ambiguous,
+its squeeze being indeterminate). An earlier version counted only fingers whose normals
+oppose within 60 degrees, and refused the quarter turn's corner pinch (one finger on the
+block's top, one on its side) for a motion in which the top finger lets go, while the
+simulation, squeezing it, executes the plan. A fixed-width gripper's rigid fingers
+squeeze nothing: their waypoints are enumerated like any other.
 
 This module reads a plan and a scenario only (like the validator, it never imports the
 planner's search).
@@ -35,9 +41,6 @@ from geometry.forward import MAX_CONTACTS, alternative_motions, falling_accelera
 # the bottom tier's G_m makes the same test at a segment's start, with the same bounds.
 from geometry.grasps import STAY_SAMPLES as _STAY_AHEAD
 from geometry.grasps import STAY_TRAVEL
-# Two finger contacts squeeze the object when their normals push against each other within
-# 60 degrees: one definition for the judge and the bottom tier's G_m (geometry.grasps.squeezing).
-from geometry.grasps import SQUEEZE_COS
 from geometry.poses import BoolArray, IntArray, transform_points, wrap_angle
 from geometry.shapes import FloatArray
 from geometry.tolerances import PENETRATION_TOL
@@ -47,7 +50,7 @@ from geometry.world import World
 from ldhp_tamp.validate import (ROUNDING_SLACK, PlanArrays, PlanContacts, PresentGroup, finger_offsets, plan_contacts,
                                 present_groups, press_table, pressed_support, rotate_vectors)
 
-__all__ = ["ForwardReport", "forward_check", "SQUEEZE_COS"]
+__all__ = ["ForwardReport", "forward_check"]
 
 log = logging.getLogger(__name__)
 
@@ -205,13 +208,11 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
     L = world.object.length_scale
     finger_moves = np.where(c.on, np.linalg.norm(other, axis=-1), 0.0).max(axis=1, initial=0.0)
     moving = (np.abs(planned[:, :2]).max(axis=1) > _STILL) | (np.abs(turn) * L > _STILL) | (finger_moves > _STILL)
-    # a pinch: two finger contacts whose normals push against each other
+    # a pinch: both fingers on the object, the gripper closed on it under force (the
+    # executor's squeeze, geometry.grasps.squeezing), whatever their normals
     f1 = c.on & (c.finger == 0)[None, :]
     f2 = c.on & (c.finger == 1)[None, :]
-    n1 = np.where(f1[..., None], c.normals, 0.0).sum(axis=1)
-    n2 = np.where(f2[..., None], c.normals, 0.0).sum(axis=1)
-    squeeze = f1.any(axis=1) & f2.any(axis=1) & ((n1 * n2).sum(axis=1) <= SQUEEZE_COS * np.linalg.norm(n1, axis=1)
-                                                  * np.linalg.norm(n2, axis=1))
+    squeeze = f1.any(axis=1) & f2.any(axis=1)
     if world.gripper.fixed_width:  # rigid fingers squeeze nothing: the motion decides alone
         squeeze[:] = False
     # a step's press holds its finger's normal force (the executor's guarded move):

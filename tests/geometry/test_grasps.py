@@ -782,36 +782,38 @@ def test_a_finger_that_would_rise_off_a_resting_block_starts_its_tip_only_presse
 SQUARE = [[0, 0], [80, 0], [80, 80], [0, 80]]  # the quarter turn's 80 mm block: l1 bottom, l2 right, l3 top, l4 left
 
 
-def test_two_fingers_that_do_not_squeeze_must_push_into_a_resting_block_to_tip_it() -> None:
+def _tip_about_v1(deg: float) -> np.ndarray:
+    phi = np.radians(np.arange(0.0, deg + 1e-9, 0.5))
+    return np.stack([np.zeros_like(phi), np.zeros_like(phi), phi], axis=1)  # the square about v1 = (0, 0)
+
+
+def test_rigid_fingers_must_push_into_a_resting_block_to_tip_it_a_closing_gripper_squeezes() -> None:
     """The square block rests on the table alone; tipped counter-clockwise about its
-    bottom-left corner. Two fingers hugging its top-left corner, one on its left side and
-    one on its top (normals at right angles: the gripper does not squeeze them), move with
-    the planned motion away from the side and along the top: the object may as well stay
-    (the judge's forward problem finds that motion), so G_m refuses them as it refuses a
-    lone finger that rises off. A pinch of the two sides squeezes the block and carries it
-    by its grip: the test does not apply to it, and G_m keeps it. A fixed-width gripper
-    squeezes nothing."""
-    world = make_world(TwoPointGripper(R, (10.0, 150.0)), SQUARE, mu_grip=0.8)
-    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=20))
-    phi = np.radians(np.arange(0.0, 5.0 + 1e-9, 0.5))
-    path = np.stack([np.zeros_like(phi), np.zeros_like(phi), phi], axis=1)  # about v1 = (0, 0)
-    cand = candidates(world, gs, path)
-    two = cand[gs.n_touching[cand] == 2]
-    feat = np.sort(gs.feature[two], axis=1)
-    hugs = two[(feat == [2, 3]).all(axis=1)]  # one finger on l3 (top), the other on l4 (left)
-    sides = two[(feat == [1, 3]).all(axis=1)]  # l2 and l4
-    assert hugs.size and sides.size
-    assert not grasps_module.squeezing(world, gs, hugs).any()
-    assert grasps_module.squeezing(world, gs, sides).all()
-    idle = grasps_module._leaves_it_still(world, gs, path, np.concatenate([hugs, sides]))
-    assert idle[:hugs.size].all() and not idle[hugs.size:].any()
-    res = motion_conditioned(world, gs, path, np.concatenate([hugs, sides]), rate=False)
-    assert not np.isin(hugs, res.indices).any() and np.isin(hugs, res.rejected).all()
-    assert np.isin(sides, res.indices).any()
+    bottom-left corner. Two fingers of a fixed-width gripper hugging its top-left corner
+    (one on its left side, one on its top) move with the planned motion away from the
+    side and along the top: rigid, they squeeze nothing, the object may as well stay (the
+    judge's forward problem finds that motion), so G_m refuses them as it refuses a lone
+    finger that rises off. The same two fingers of a gripper that closes under force grip
+    the corner (the executor closes until its force setting): they squeeze, the test does
+    not apply, and G_m keeps those that balance the motion."""
     fixed = make_world(TwoPointGripper(R, (90.0, 90.0)), SQUARE, mu_grip=0.8)
-    fixed_set = enumerate_grasps(fixed, GraspOptions(samples_per_edge=20))
-    pinched = np.flatnonzero(fixed_set.n_touching == 2)
-    assert pinched.size and not grasps_module.squeezing(fixed, fixed_set, pinched).any()
+    closing = make_world(TwoPointGripper(R, (10.0, 150.0)), SQUARE, mu_grip=0.8)
+    path = _tip_about_v1(5.0)
+    for world, squeezes in ((fixed, False), (closing, True)):
+        gs = enumerate_grasps(world, GraspOptions(samples_per_edge=20))
+        cand = candidates(world, gs, path)
+        two = cand[gs.n_touching[cand] == 2]
+        hugs = two[(np.sort(gs.feature[two], axis=1) == [2, 3]).all(axis=1)]  # l3 (top) and l4 (left)
+        assert hugs.size
+        assert (grasps_module.squeezing(world, gs, hugs) == squeezes).all()
+        idle = grasps_module._leaves_it_still(world, gs, path, hugs)
+        assert idle.all() != squeezes and idle.any() != squeezes
+        res = motion_conditioned(world, gs, path, hugs, rate=False)
+        if squeezes:
+            assert np.isin(hugs, res.indices).any()
+        else:
+            assert not np.isin(hugs, res.indices).any() and np.isin(hugs, res.rejected).all()
+        assert not grasps_module.squeezing(world, gs, cand[gs.n_touching[cand] == 1]).any()
 
 
 def test_a_finger_dragging_the_top_of_a_tilted_block_continues_its_tip_only_pressed() -> None:

@@ -81,3 +81,55 @@ def test_a_tip_the_fingers_do_not_force_is_refused() -> None:
     report = forward_check(plan, load_scenario(repo / "scenarios" / "gen_lift_concave11.toml"))
     assert not report.ok and report.step == 1 and plan.steps[1].primitive == "tip"
     assert "may stay where it is" in report.reason
+
+
+SQUARE_BLOCK = """
+format = "ldhp-scenario/1"
+name = "square-block"
+[object]
+vertices = [[0, 0], [80, 0], [80, 80], [0, 80]]
+[[environment.solids]]
+name = "table"
+vertices = [[-300, -50], [300, -50], [300, 0], [-300, 0]]
+[gripper]
+model = "two-point"
+finger_radius = 5
+spacing = [{lo}, {hi}]
+[friction]
+environment = 0.3
+gripper = 0.8
+[task]
+start = [0, 0, 0]
+goal = [0, 0, 0]
+"""
+
+
+def _corner_tip_plan(turn_deg: float = 5.0, steps: int = 5) -> tuple[Plan, float]:
+    """Two fingers on the square block's top-right corner, finger 1 on its right face at
+    height 75 and finger 2 on its top at x = 60 (normals at right angles), the block
+    tipped counter-clockwise about its bottom-left corner with the gripper carried along."""
+    c1, c2 = (85.0, 75.0), (60.0, 85.0)
+    w = math.hypot(c2[0] - c1[0], c2[1] - c1[1])
+    grip0 = Pose((c1[0] + c2[0]) / 2, (c1[1] + c2[1]) / 2, math.atan2(c2[1] - c1[1], c2[0] - c1[0]))
+    wps = []
+    for k in range(steps + 1):
+        obj = Pose(0.0, 0.0, math.radians(turn_deg) * k / steps)
+        p1, p2 = obj.apply((80.0, 75.0)), obj.apply((60.0, 80.0))
+        wps.append(Waypoint(obj, obj.compose(grip0), w, ((float(p1[0]), float(p1[1])), (float(p2[0]), float(p2[1])))))
+    step = Step("tip", Family.MOVE_OBJECT, {}, ("l1-e1", "v1-e1"), tuple(wps))
+    return Plan(PLAN_FORMAT, "square-block", "0" * 64, PlanStatus.SOLVED, (step,), PlanStats()), w
+
+
+def test_two_fingers_on_a_corner_of_a_gripper_that_closes_are_left_to_the_grip_force() -> None:
+    """The quarter turn's tip: a corner pinch (one finger on the side, one on the top) of
+    a gripper that closes under force grips the corner; neither finger can let go, and the
+    grip is the physics replay's to judge (which executes the quarter turn's plan). The
+    same fingers rigid on a fixed-width gripper squeeze nothing: the top one may let go
+    and the side one push the block along the table instead of tipping it (tipping about
+    the far corner takes 0.53 W at height 75, sliding 0.3 W)."""
+    plan, w = _corner_tip_plan()
+    closing = load_scenario_string(SQUARE_BLOCK.format(lo=10, hi=150), "square-block")
+    assert forward_check(plan, closing).ok
+    rigid = load_scenario_string(SQUARE_BLOCK.format(lo=w, hi=w), "square-block")
+    report = forward_check(plan, rigid)
+    assert not report.ok and report.step == 0 and report.waypoint == 0, report.reason
