@@ -816,6 +816,36 @@ def test_rigid_fingers_must_push_into_a_resting_block_to_tip_it_a_closing_grippe
         assert not grasps_module.squeezing(world, gs, cand[gs.n_touching[cand] == 1]).any()
 
 
+def test_a_pinch_closes_onto_contact_samples_so_either_finger_can_stay() -> None:
+    """With a spacing range finger 2 closes along the closing angles and lands where the
+    ray meets the object; its contact is moved to the nearest sample of that edge (the
+    closing direction turning by under half a sample spacing over the span), so both
+    contacts of a pinch are anchors of the one-finger grasps enumerated there: the gripper
+    can keep finger 2 and let finger 1 go (a handover; off the grid no other grasp shares
+    finger 2's contact). Offsets drawn per edge, as a solve draws them: the two sides'
+    samples are not mirror images."""
+    world = make_world(TwoPointGripper(R, (10.0, 150.0)), SQUARE, mu_grip=0.8)
+    k, offsets = 20, (0.3, 0.55, 0.8, 0.15)
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=k, edge_offsets=offsets))
+    poly = world.object.polygon
+    two = np.flatnonzero((gs.n_touching == 2) & (gs.feature < len(poly)).all(axis=1))
+    assert two.size > 100
+    for f in (0, 1):
+        edge = gs.feature[two, f]
+        d = poly.edge_vectors[edge]
+        t = np.sum((gs.contact[two, f] - poly.vertices[edge]) * d, axis=1) / np.sum(d * d, axis=1)
+        cell = t * k - np.asarray(offsets)[edge]
+        assert np.allclose(cell, np.round(cell), atol=1e-6)  # both contacts on the sample grid
+    one = np.flatnonzero(gs.n_touching == 1)
+    anchors = {tuple(np.round(gs.contact[g, 0 if gs.touching[g, 0] else 1], 6)) for g in one}
+    assert all(tuple(np.round(gs.contact[g, 1], 6)) in anchors for g in two)
+    # the fingers sit on their contacts: each centre the finger radius from it, along the gripper's axis
+    axis = np.stack([np.cos(gs.gripper[two, 2]), np.sin(gs.gripper[two, 2])], axis=1)
+    for f, sign in ((0, -1.0), (1, 1.0)):
+        centre = gs.gripper[two, :2] + sign * axis * gs.width[two, None] / 2
+        assert np.allclose(np.linalg.norm(gs.contact[two, f] - centre, axis=1), R, atol=1e-6)
+
+
 def test_a_finger_dragging_the_top_of_a_tilted_block_continues_its_tip_only_pressed() -> None:
     """The same tip continued from 10 degrees: the block no longer rests on the table
     alone (it would fall back on its bottom), so the start-at-rest test does not apply.
