@@ -1404,7 +1404,7 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
                 break
         alive = check(alive, samples)
     alive = np.union1d(alive, check(known, again))
-    # Grasps held by position control (one finger, or two that do not squeeze) whose
+    # Grasps held by position control (one finger, or a fixed-width gripper's two) whose
     # fingers would leave the object resting where it is make the motion only under a
     # press (:func:`press_forces`, one-finger grasps); those no press of the ladder serves
     # are rejected (for the path as a whole).
@@ -1489,16 +1489,17 @@ STAY_SAMPLES = 8
 
 
 def _leaves_it_still(world: World, grasps: GraspSet, p: FloatArray, cand: IntArray) -> BoolArray:
-    """(len(cand),) the grasps of ``cand`` held by position control (one finger, or two
-    that do not squeeze: :func:`squeezing`) that cannot start the motion along ``p``: the
+    """(len(cand),) the grasps of ``cand`` held by position control (one finger, or the
+    two rigid fingers of a fixed-width gripper, which do not squeeze: :func:`squeezing`)
+    that cannot start the motion along ``p``: the
     object rests on the environment alone at ``p[0]`` (full cones), and over the next
     samples, up to :data:`STAY_TRAVEL` of gripper travel, no finger moving with the
     planned motion presses into the object left where it is (by more than
     ``PENETRATION_TOL``). Position control moves the fingers; the object may as well stay
     and the fingers leave it (a finger on a standing block's top face "tipping" it about
-    a bottom corner rises off it; two fingers hugging a block's top corner, one on its
-    side and one on its top, "tip" it about the far bottom corner moving away from the
-    side and along the top). Balancing forces along the path exist for such a grasp, so
+    a bottom corner rises off it; two rigid fingers hugging a block's top corner, one on
+    its side and one on its top, "tip" it about the far bottom corner moving away from
+    the side and along the top). Balancing forces along the path exist for such a grasp, so
     the per-sample test alone admits it; the forward problem (the judge's "the object may
     stay", which asks every grasp but a squeezing pinch) does not."""
     out = np.zeros(cand.size, dtype=bool)

@@ -54,7 +54,6 @@ __all__ = ["ForwardReport", "forward_check"]
 
 log = logging.getLogger(__name__)
 
-
 #: Motions smaller than this (mm, and radians times the length scale) are no motion: the
 #: slack of numbers that went through a plan file rounded to 6 decimals (a finger that
 #: stays put in the planner's arrays moves by a few 1e-6 mm once written and read back).
