@@ -382,8 +382,11 @@ def falling_accelerations(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, 
     count = live.sum(axis=1)
     FREE, STICK, SPLUS, SMINUS = 0, 1, 2, 3
     for kk in np.unique(count):
-        rows = np.flatnonzero(count == kk)
+        group = np.flatnonzero(count == kk)
         for assign in itertools.product((FREE, STICK, SPLUS, SMINUS), repeat=int(kk)):
+            rows = group[~onto[group]]  # an instance found leaning on its probe is decided
+            if not rows.size:
+                break
             a_ = np.asarray(assign, dtype=np.int8)
             n_st, n_sl = int((a_ == STICK).sum()), int((a_ >= SPLUS).sum())
             nu = 3 + 2 * n_st + n_sl

@@ -28,6 +28,7 @@ import enum
 import logging
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import shapely
@@ -229,6 +230,12 @@ class GraspSet:
         c = self.contact if indices is None else self.contact[np.asarray(indices)]
         return Pose.from_array(pose).apply(c)
 
+    @cached_property
+    def _mu_memo(self) -> list[Any]:
+        # [world, table]: contact_mu of the last world asked (a solve asks with one world,
+        # thousands of times: each a pass over every grasp)
+        return [None, None]
+
     def contact_mu(self, world: World) -> FloatArray:
         """(G, 2) finger-object friction coefficient of each contact (NaN if none).
 
@@ -240,6 +247,15 @@ class GraspSet:
         contact at the vertex (plan rule 7), and a plan must not lean on friction that
         its judge does not grant (a cover 0.7 mm from a frictionless end face).
         """
+        memo = self._mu_memo
+        if memo[0] is world:
+            return memo[1]
+        out = self._contact_mu(world)
+        out.setflags(write=False)
+        memo[0], memo[1] = world, out
+        return out
+
+    def _contact_mu(self, world: World) -> FloatArray:
         n = self.n_object
         fr = world.friction
         table = np.array([fr.gripper_mu("l", i, n) for i in range(n)]

@@ -911,3 +911,16 @@ def test_a_contact_the_validator_counts_at_a_vertex_has_the_vertexs_friction() -
                                 for v in verts[[0, 3]]]).min(axis=0) <= VALIDATE_TOL)
     assert far.any() and (mu[far] == 0.6).all()  # v1, v4: both edges 0.6
     assert (mu[gs.touching & (gs.feature == 1)] == 0.0).all() and np.isnan(mu[~gs.touching]).all()
+
+
+def test_contact_mu_is_kept_for_the_world_asked_and_redone_for_another() -> None:
+    """A solve asks ``contact_mu`` with one world thousands of times: the table is kept
+    (the same read-only array), and a world with other coefficients gets its own."""
+    world = make_world(TwoPointGripper(R, (10.0, 150.0)), obj=PICK_BLOCK)
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=10))
+    first = gs.contact_mu(world)
+    assert gs.contact_mu(world) is first and not first.flags.writeable
+    other = World(world.object, world.environment, world.gripper, Friction(0.3, 0.2))
+    mu = gs.contact_mu(other)
+    assert np.allclose(mu[gs.touching], 0.2) and np.isnan(mu[~gs.touching]).all()
+    assert np.array_equal(gs.contact_mu(world), first, equal_nan=True)
