@@ -403,37 +403,25 @@ class PathSearch:
         return [moves for _, _, _, moves in scored[:self.limit]]
 
     def _candidates(self, t: Transition, pose: Pose, lift_next: bool = False) -> Iterator[tuple[Segment, ...]]:
-        """A transition's stream: the primitive's own samples from ``pose``, then samples
-        from poses reached by an in-state motion (:func:`reposition`, at most
-        ``MAX_REPOSITIONS`` of them), ranked by the distance of their end pose to T'_g.
+        """A transition's stream: the primitive's own samples from ``pose``; when it has
+        none, samples from poses reached by an in-state motion (:func:`reposition`, at
+        most ``MAX_REPOSITIONS`` of them), ranked by the distance of their end pose to T'_g.
         Before a lift out of the state the transition enters (``lift_next``), its samples
-        ended where the object is best lifted off come first (:meth:`_lift_offs`).
-
-        The in-state motions are drawn only once the own samples are used up (the
-        generator is lazy): when there are none (a block standing 20 mm from a wall
-        cannot tip towards it, but can once pushed along the floor), or when every pose
-        path through them failed. Then they are *detours*: a grasp that executes the
-        transition may be reachable only where the carried grasp can be changed, and that
-        may lie away from the goal (task 1's inverse: the wedge hold it starts in is let
-        go of only once the block is tipped further down, past about 69 degrees). A
-        detour along one of the transition's own motions is left out: it is that motion
-        cut in two, which the dichotomy refinement does already."""
+        ended where the object is best lifted off come first (:meth:`_lift_offs`)."""
         impl = self.registry.implementation(t.action)
         own = self._sample(impl, t, pose)
         if own:
             if lift_next:
                 yield from self._lift_offs(t, own)
             yield from own
-        if own is None or t.from_state.is_free:
+        if own is None or own or t.from_state.is_free:
             return
-        along = {_motion_key(moves[0].motion) for moves in own}
         # repositioning sweeps every family of every primitive: a sample call's worth each
         if not self._charge(len(self.domain.names(Family.MOVE_OBJECT))):
             return
         scored: list[tuple[float, float, tuple[Segment, ...]]] = []
-        pres = [pre for pre in reposition(self.ctx, self.domain, self.registry, t.from_state, pose, rng=self.rng)
-                if _motion_key(pre.motion) not in along]
-        for pre in pres[:MAX_REPOSITIONS]:
+        for pre in reposition(self.ctx, self.domain, self.registry, t.from_state, pose,
+                              rng=self.rng)[:MAX_REPOSITIONS]:
             self.stats.repositions += 1
             samples = self._sample(impl, t, pre.end)
             if samples is None:
@@ -444,14 +432,6 @@ class PathSearch:
         scored.sort(key=lambda x: (x[0], x[1]))
         for _, _, moves in scored[:self.limit]:
             yield moves
-
-
-def _motion_key(motion: Motion) -> tuple[object, ...]:
-    """What tells motion families from one pose apart: the kind, the sense, the pivot or
-    direction (rounded), the kept contacts."""
-    def r(v: tuple[float, float] | None) -> tuple[float, ...] | None:
-        return None if v is None else tuple(round(float(x), 6) for x in v)
-    return (motion.kind, motion.sense, r(motion.pivot), r(motion.direction), motion.kept)
 
 
 #: Grid step (mm of vertex motion) of the lift-off poses looked at along a motion before a lift.

@@ -168,7 +168,6 @@ def test_task1_tip_stream_offers_an_overshoot_aligned_back(task1, domain) -> Non
     sc, ctx = task1
     plan = [Transition("tip", S("l1-e1"), S("v2-e1")), Transition("air-move", S("v2-e1"), FREE)]
     paths = list(pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats(), limit=3))
-    paths = [p for p in paths if not p.segments[0].parameters.get("in_state")]  # the tip's own samples, not detours
     angles = [p.segments[0].parameters["angle"] for p in paths]
     assert angles[0] == pytest.approx(60.0, abs=1e-6)
     over = [p for p in paths if 69.0 < p.segments[0].parameters["angle"] < 85.0]
@@ -194,12 +193,8 @@ def test_stream_repositions_within_a_state(task2, domain) -> None:
         check_joined(path.segments)
         last_tip = [s for s in path.segments if s.primitive == "tip" and s.to_state == S("l4-e1")][0]
         k = path.segments.index(last_tip)
-        # an in-state motion first: on v1 (repositioned, the tip having no sample from where
-        # the first tip leaves the block), or standing (a detour of the first tip, once its
-        # own samples are used up)
-        moved = [s for s in path.segments[:k] if s.parameters.get("in_state")]
-        assert moved and moved[-1].from_state == moved[-1].to_state
-        assert moved[-1].from_state in (S("v1-e1"), S("l1-e1"))
+        before = path.segments[k - 1]
+        assert before.parameters["in_state"] and before.from_state == before.to_state == S("v1-e1")
         # the pivot v1 is at least the block's diagonal from the left wall
         assert last_tip.motion.pose(0.0).x >= 160.0
 
@@ -371,32 +366,3 @@ def test_a_notched_polygon_lying_in_the_corner_is_a_three_contact_state(domain) 
     tr = admissible_transitions(ctx, domain.info, REGISTRY)
     assert (S("v1-e1+v2-e8"), corner) in tr["biplanar-slide"]
     assert (corner, ctx.goal_state) in tr["push"]
-
-
-def test_after_its_own_samples_a_transition_is_streamed_after_a_detour(domain) -> None:
-    """Task 1's inverse: the block set down on its corner v2 at 60 degrees is tipped back
-    to standing (one sample: the tip ends where l1 lands). When the bottom tier fails it,
-    the stream goes on with the same tip from poses an in-state motion reaches first (a
-    detour): not along the tip's own rotation (that is the tip cut in two, the
-    refinement's business), e.g. tipped further down about v2 first."""
-    sc = load_scenario(scenarios_dir() / "inv_place_release.toml")
-    ctx = build_context(sc.world, sc.start, sc.goal)
-    plan = [Transition("air-move", FREE, S("v2-e1")), Transition("tip", S("v2-e1"), S("l1-e1"))]
-    search = pose_paths(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats())
-    first = search.next()
-    assert first is not None and first.primitives == ("air-move", "tip")
-    tip = first.segments[1]
-    detours = []
-    for _ in range(3):
-        path = search.next(failed_step=1)
-        if path is None:
-            break
-        check_joined(path.segments)
-        assert _first_difference(first, path) == 1
-        pre = [s for s in path.segments if s.step == 1 and s.parameters.get("in_state")]
-        assert pre and pre[0].from_state == pre[0].to_state == S("v2-e1")
-        assert not (pre[0].primitive == "tip" and pre[0].motion.sense == tip.motion.sense
-                    and np.allclose(pre[0].motion.pivot, tip.motion.pivot))
-        detours.append(pre[0])
-    assert detours
-    assert any(d.primitive == "tip" and d.motion.sense != tip.motion.sense for d in detours)  # tipped further first
