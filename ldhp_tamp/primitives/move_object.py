@@ -612,12 +612,21 @@ class AirMove:
         object lands; the ``limit`` where that hold is firmest first (least reaction
         angle: the least fraction of the friction it needs). A start hold at the edge of
         its friction cone may not last the way down (task 1's inverse: wedged at 97 % of
-        the cone at -60 degrees, at 48 % at -75)."""
+        the cone at -60 degrees, at 48 % at -75). None into a state with a face on a face
+        (it fixes the orientation); computed once per solve (``ctx.memo``)."""
+        g = ctx.start_grasp
+        if ctx.grasps is None or g is None or any(c.kind is ContactKind.EDGE_EDGE for c in to_state.contacts):
+            return []  # (a face on a face fixes the orientation: no turn lands there)
+        key = ("turned-downs", to_state, start_pose.as_array().tobytes(), limit)
+        if key not in ctx.memo:
+            ctx.memo[key] = self._turned_downs_of(ctx, to_state, start_pose, limit, g)
+        return ctx.memo[key]
+
+    def _turned_downs_of(self, ctx: PlanningContext, to_state: ContactState, start_pose: Pose, limit: int,
+                         g: int) -> list[tuple[Segment, ...]]:
         from ldhp_tamp.contact_graph import ContactPoseError, contact_pose  # (it imports the registry)
 
-        g = ctx.start_grasp
-        if ctx.grasps is None or g is None:
-            return []
+        assert ctx.grasps is not None
         rows = np.array([g])
         scored: list[tuple[float, float, tuple[Segment, ...]]] = []
         for k in range(1, int(round(90.0 / STEP1_TURN_DEG)) + 1):
