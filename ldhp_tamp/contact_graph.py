@@ -103,6 +103,10 @@ class PlanningContext:
     """The enumerated grasp set, for admissibility that needs some grasp to exist (an
     air-move lift or placement needs a grasp that carries the object); ``None``: such
     transitions are admitted without that test."""
+    start_grasp: int | None = None
+    """The row of :attr:`grasps` the object starts held in (``None``: it starts free of
+    the gripper): the Step-1 air-move may turn the object in the air first, to where that
+    hold is firmer."""
     memo: dict[Any, Any] = field(default_factory=dict, repr=False)
     """Results the streams may compute again for the same input within one solve (a
     stream's sweeps: the top-tier iterations share their first steps), keyed by it."""

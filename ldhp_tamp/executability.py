@@ -183,6 +183,28 @@ def _falls_off_the_finger(world: World, flat: PlanArrays, c: PlanContacts, com: 
     return out
 
 
+def _same_leg(flat: PlanArrays, rows: IntArray) -> BoolArray:
+    """(len(rows),) whether waypoints ``i - 1``, ``i``, ``i + 1`` are in one step and the
+    displacements ``i - 1 -> i`` and ``i -> i + 1`` turn the gripper and the object by the
+    same angles and change the width by the same amount (relative 1e-3): one leg, sampled
+    evenly, where a central difference of the motion is its derivative at ``i``."""
+    i = np.asarray(rows, dtype=np.int64)
+    a, b = np.maximum(i - 1, 0), np.minimum(i + 1, len(flat) - 1)
+    ok = (i > 0) & (flat.step[a] == flat.step[i]) & (flat.step[b] == flat.step[i])
+
+    def alike(x: FloatArray, y: FloatArray) -> BoolArray:
+        return np.abs(x - y) <= _LEG_REL * np.maximum(np.abs(x), np.abs(y)) + 1e-12
+
+    for angles in (flat.grip[:, 2], flat.obj[:, 2]):
+        ok &= alike(wrap_angle(angles[i] - angles[a]), wrap_angle(angles[b] - angles[i]))
+    ok &= alike(flat.width[i] - flat.width[a], flat.width[b] - flat.width[i])
+    return ok
+
+
+#: Relative difference under which two displacements of a step count as one leg's.
+_LEG_REL = 1e-3
+
+
 def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
     """The forward problem at every waypoint of ``plan`` but the last (see the module
     docstring). Waypoints with more than :data:`~geometry.forward.MAX_CONTACTS` contacts
@@ -196,13 +218,24 @@ def forward_check(plan: Plan, scenario: Scenario) -> ForwardReport:
     rows = np.arange(n - 1)
     nxt = rows + 1
     c = plan_contacts(world, flat.take(slice(0, n - 1)))
+    # The commanded motion at waypoint i: the displacement to the next waypoint, or, where
+    # the previous one is in the same step and the two displacements turn the gripper and
+    # the object by the same angles and change the width alike (one leg of one motion),
+    # the displacement from the previous to the next (a central difference, its scale
+    # immaterial: the forward problem is homogeneous in the velocities). A finger that
+    # rolls on the object turns about its contact point, which moves along the edge: the
+    # forward displacement's screw turns about a point half a step ahead of the contact,
+    # and the finger's surface there seems to leave the object by radius x turn^2 / 2;
+    # the central one is centred on it. For a screw of constant twist (a tip, a push, a
+    # spin about a finger) both are the same.
+    prv = np.where((rows > 0) & _same_leg(flat, rows), rows - 1, rows)
     # planned twist: the COM's displacement and the turn; the other bodies' displacements
     com0 = transform_points(flat.obj[rows], world.object.com)[:, 0]
-    turn = wrap_angle(flat.obj[nxt, 2] - flat.obj[rows, 2])
-    planned = np.column_stack([screw_velocity(flat.obj[rows], flat.obj[nxt], com0[:, None, :])[:, 0], turn])
+    turn = wrap_angle(flat.obj[nxt, 2] - flat.obj[prv, 2])
+    planned = np.column_stack([screw_velocity(flat.obj[prv], flat.obj[nxt], com0[:, None, :])[:, 0], turn])
     finger = c.finger >= 0
-    dg = screw_velocity(flat.grip[rows], flat.grip[nxt], c.points)  # (B, C, 2)
-    shift = rotate_vectors(flat.grip[nxt], finger_offsets(flat.width[nxt] - flat.width[rows]))  # (B, 2, 2)
+    dg = screw_velocity(flat.grip[prv], flat.grip[nxt], c.points)  # (B, C, 2)
+    shift = rotate_vectors(flat.grip[nxt], finger_offsets(flat.width[nxt] - flat.width[prv]))  # (B, 2, 2)
     other = np.where(finger[None, :, None], dg + shift[:, np.clip(c.finger, 0, 1), :], 0.0)
     L = world.object.length_scale
     finger_moves = np.where(c.on, np.linalg.norm(other, axis=-1), 0.0).max(axis=1, initial=0.0)

@@ -88,7 +88,8 @@ class SimOptions:
         Least time spent between two waypoints (s), also when the hand does not move.
     start_hold_s : float
         Before the motion the object is held still at the start pose this long while the
-        fingers take their commanded width (and squeeze, for a held start).
+        fingers take their commanded width (and squeeze, for a held start); with rigid
+        fingers (a fixed width) it is free meanwhile, settling into its contacts.
     settle_s : float
         After the last waypoint the commands stay put this long before the goal check.
     preload_mm : float
@@ -496,7 +497,14 @@ def simulate_plan(plan: Plan, scenario: Scenario, options: SimOptions = SimOptio
     run.place(scenario.start, cmd.hand[0], [f for f in (-plan.waypoints[0].width / 2.0 * MM,
                                                          plan.waypoints[0].width / 2.0 * MM)])
     run.command(cmd.hand[0], cmd.fingers[0])
-    run.hold_object(options.start_hold_s)
+    if run.fa:  # finger drives close to their commanded width and preload first
+        run.hold_object(options.start_hold_s)
+    else:
+        # Rigid fingers (a fixed width) have nothing to wait for: the object settles into
+        # its contacts with the hand. Pinned, its contacts would carry nothing at the
+        # release, and it would drop into them: task 1's inverse starts wedged at 97 % of
+        # the friction cone, and that drop alone made it slide out.
+        run.hold(options.start_hold_s)
 
     records: list[WaypointRecord] = []
     presses: list[tuple[int, float, float, float]] = []  # step, asked (N), reached (N), offset (mm)

@@ -319,6 +319,9 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
     grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release,
                                  GraspGraphOptions(helper=options.helpers), start_any=scenario.start_grasp_any)
+    if scenario.start_grasp is not None:  # the grasp the object starts in, for the Step-1 air-move
+        grasp_planner.prepare((ctx.start if ctx.start_free else ctx.start_contact.pose).as_array())
+        ctx = replace(ctx, grasps=grasp_planner.grasps, start_grasp=int(grasp_planner.start_index))
     clock.setup = budget.clock() - clock.start
     budget.check(deadline, "the setup (contact-state graph, admissible transitions)")
     say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "

@@ -10,7 +10,8 @@ PDDL action name with :attr:`Family.ADJUST_GRASP`:
 - ``close``: one finger touching -> both; the touching finger stays put, the other closes
   (not for a fixed-width gripper).
 - ``pivot``: turn the gripper about a touching finger (a circle about its centre, a pad
-  about its contact point) to another grasp that keeps that contact.
+  about its contact point) to another grasp that keeps that contact; or roll a round
+  finger along the edge it touches (the contact moves by radius x turn).
 - ``slide``: translate the gripper along the object edge a finger touches, to another
   grasp on the same edge (same orientation and width).
 - ``flip``: open, turn the gripper by 180 degrees in the plane about the gripper-frame
@@ -1436,6 +1437,17 @@ class Pivot(_AdjustGrasp):
     finger (turning about its centre, its surface slips over the contact); the other
     finger is FREE between the ends. Travel: ``|angle|`` times the mean distance of the
     fingers' anchors from the centre at the turn width, plus half the width change.
+
+    A round finger may also *roll* (``sense`` +-``ROLL_SENSE``, :meth:`_rolls`,
+    :func:`_roll_legs`): the gripper turns about the finger's centre while the centre
+    moves along the edge by ``radius x turn``, so the contact moves along the edge and
+    sticks, to a grasp at the same width with the finger on the same edge where the roll
+    puts it (within ``ROLL_TOL``, the rest slipped). Turning in place, the finger's
+    surface drags the object along the edge, which what else holds it may not resist:
+    task 1's inverse holds its block wedged on its corner, and the finger under it can let
+    the other go only by rolling (spinning, it drags the block towards the corner on the
+    table, beyond the table's friction). Travel: ``|turn|`` times the mean anchor
+    distance from the finger's centre, plus the slip.
     """
 
     name = "pivot"
@@ -1455,6 +1467,10 @@ class Pivot(_AdjustGrasp):
                 rad = (wide if abs(sense) == 1 else narrow)[i]
                 ang = _turn(delta[i], np.sign(sense))
                 out.append((a[i], b[i], np.full(i.size, sense), np.full(i.size, k), np.abs(ang) * rad + radial[i]))
+            a, b, delta, rad, resid = self._rolls(ctx, k)
+            keep = is_src[a] & members[b]
+            out.append((a[keep], b[keep], ROLL_SENSE * np.sign(delta[keep]).astype(np.int64), np.full(int(keep.sum()), k),
+                        np.abs(delta[keep]) * rad[keep] + np.abs(resid[keep])))
         if not out:
             z = np.zeros(0, np.int64)
             return z, z, z, z, np.zeros(0)
@@ -1517,16 +1533,106 @@ class Pivot(_AdjustGrasp):
         _keep_finger(context, turn_leg, a, k, role, np.asarray(turn, dtype=bool).reshape(-1))
         close_leg = _linear(g1, _at_width(context, b, k, wb), wt, wb)
         _keep_finger(context, close_leg, b, k, FingerRole.FIXED)
-        return _assemble(a, b, [open_leg, turn_leg, close_leg])
+        legs = [open_leg, turn_leg, close_leg]
+        rolls = np.flatnonzero(np.abs(edges.sense) == ROLL_SENSE)
+        if rolls.size:
+            _roll_legs(context, legs, rolls, a[rolls], b[rolls], k[rolls])
+        return _assemble(a, b, legs)
+
+    @staticmethod
+    def _rolls(ctx: AdjustContext, k: int) -> tuple[IntArray, IntArray, FloatArray, FloatArray, FloatArray]:
+        """Every rolling pivot about round finger k in the grasp set (none for pads):
+        (source, target, turn, mean anchor radius about the finger's centre, the slide
+        left after the roll). Source and target touch with finger k on the same object
+        edge at the same width; turning the gripper by ``delta`` (the short way) while
+        the finger rolls moves its contact along the edge by ``radius * delta``, and the
+        target's contact lies within ``ROLL_TOL`` of there (the rest is slid). Computed
+        once per grasp set."""
+        key = ("pivot-rolls", k)
+        hit = ctx._cache.get(key)
+        if hit is not None:
+            return hit
+        gs = ctx.grasps
+        z = np.zeros(0, np.int64)
+        if ctx.is_polyline:
+            hit = ctx._cache[key] = (z, z, np.zeros(0), np.zeros(0), np.zeros(0))
+            return hit
+        r = float(ctx.world.gripper.finger_radius)
+        rows = np.flatnonzero(gs.touching[:, k] & (gs.feature[:, k] >= 0) & (gs.feature[:, k] < gs.n_object))
+        rows = rows[rows != NO_CONTACT]
+        # one group per edge and width, sorted by the contact's place along the edge
+        u = gs.arclength[rows, k]
+        order = np.lexsort((u, ctx._q(gs.width[rows]), gs.feature[rows, k]))
+        rows, u = rows[order], u[order]
+        group = np.concatenate([[0], np.cumsum((np.diff(gs.feature[rows, k]) != 0)
+                                                | (np.diff(ctx._q(gs.width[rows])) != 0))]) if rows.size else z
+        reach = r * np.pi + ROLL_TOL  # the farthest a turn of at most half a circle rolls
+        key_u = group * (10.0 * (gs.perimeter + reach)) + u  # groups far apart on one line
+        lo = np.searchsorted(key_u, key_u - reach, side="left")
+        hi = np.searchsorted(key_u, key_u + reach, side="right")
+        cnt = hi - lo
+        ia = np.repeat(np.arange(rows.size), cnt)
+        ib = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(int(cnt.sum()))
+        a, b = rows[ia], rows[ib]
+        delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
+        resid = (u[ib] - u[ia]) - r * delta
+        keep = (a != b) & (np.abs(delta) > ROLL_MIN_TURN) & (np.abs(resid) <= ROLL_TOL)
+        a, b, delta, resid = a[keep], b[keep], delta[keep], resid[keep]
+        rad = _turn_radius(ctx, a, k, ctx.anchors[a, k], gs.width[a]) if a.size else np.zeros(0)
+        hit = ctx._cache[key] = (a, b, delta, rad, resid)
+        return hit
 
     def parameters(self, context: AdjustContext, edges: IntraEdges, index: int = 0) -> dict[str, Any]:
         out = super().parameters(context, edges, index)
         one = edges.take([index])
         m = self.motion(context, Pose(0.0, 0.0, 0.0), one)
         out["sense"] = int(np.sign(one.sense[0]))
+        if abs(int(one.sense[0])) == ROLL_SENSE:
+            out["rolls"] = True
+            out["angle"] = round(math.degrees(float(m.angle[0, 0])), 4)
+            out["turn_width"] = round(float(m.width[0, 0]), 4)
+            return out
         out["angle"] = round(math.degrees(float(m.angle[0, 1])), 4)
         out["turn_width"] = round(float(m.width[0, 1]), 4)
         return out
+
+
+#: ``IntraEdges.sense`` of a rolling pivot (times the sign of its turn).
+ROLL_SENSE = 3
+#: The largest slide (mm) along the edge after a rolling pivot, onto the target's sample.
+ROLL_TOL = 1.0
+#: Turns smaller than this (radians) are slides, not pivots.
+ROLL_MIN_TURN = 1e-6
+
+
+def _roll_legs(ctx: AdjustContext, legs: list[_Leg], i: IntArray, a: IntArray, b: IntArray, k: IntArray) -> None:
+    """Make edges ``i`` of the pivot's three legs a rolling pivot of grasp ``a`` onto
+    ``b`` about round finger ``k``: the gripper turns by the orientation difference about
+    the finger's centre while that centre moves along the edge from ``a``'s contact to
+    ``b``'s, so the finger rolls on the object (its contact moves along the edge) and
+    slips only by what the roll does not cover (at most ``ROLL_TOL``: the contact is
+    SLIDING then, sticking for a pure roll, :func:`sample_motion` tells from the
+    motion); the other two legs stand still at ``b``. The other finger is free."""
+    gs = ctx.grasps
+    ga, gb = gs.gripper[a], gs.gripper[b]
+    delta = wrap_angle(gb[:, 2] - ga[:, 2]).reshape(-1)
+    shift = gs.contact[b, k] - gs.contact[a, k]  # the centre moves as the contact does
+    z = np.zeros(i.size)
+    for n, leg in enumerate(legs):
+        leg.start[i] = ga if n == 0 else gb
+        leg.width[i], leg.dwidth[i] = gs.width[a], 0.0
+        leg.centre[i] = ctx.anchors[a, k] if n == 0 else gb[:, :2]
+        leg.angle[i] = delta if n == 0 else z
+        leg.shift[i] = shift if n == 0 else 0.0
+        assert leg.role is not None and leg.contact is not None and leg.normal is not None and leg.mu is not None
+        leg.role[i] = FingerRole.FREE
+        leg.contact[i], leg.normal[i], leg.mu[i] = 0.0, 0.0, 0.0
+        if leg.turn_normal is not None:
+            leg.turn_normal[i] = False
+        leg.role[i, k] = FingerRole.SLIDING if n == 0 else FingerRole.FIXED
+        leg.contact[i, k] = gs.contact[a, k] if n == 0 else gs.contact[b, k]
+        leg.normal[i, k] = gs.normal[a, k]
+        leg.mu[i, k] = ctx.mu[a, k]
 
 
 def _turn(delta: FloatArray, sense: ArrayLike) -> FloatArray:

@@ -450,6 +450,9 @@ AIR_PROBE_MM = 5.0
 #: 4 mm vertex step: the carried grasp is checked at every sample, and whether it holds
 #: depends on the orientation (a small object's vertices move little per degree).
 AIR_TURN_STEP_DEG = 2.0
+#: Step 1 after a turn in the air (:meth:`AirMove._turned_downs`): the turns tried are
+#: multiples of this (degrees), up to a quarter turn either way.
+STEP1_TURN_DEG = 5.0
 
 
 def _env_top(world: World, x0: float, x1: float) -> float:
@@ -475,6 +478,10 @@ def _gripper_drop(world: World) -> float:
         return float(np.max(np.linalg.norm(v[:, None, :] - v[None, :, :], axis=2)))
     assert isinstance(grip, TwoPointGripper)
     return 2.0 * float(grip.finger_radius)
+
+
+def _same_pose(a: Pose, b: Pose) -> bool:
+    return bool(np.allclose(a.as_array(), b.as_array(), atol=1e-9))
 
 
 def _same_orientation(ctx: PlanningContext, a: Pose, b: Pose) -> bool:
@@ -561,6 +568,8 @@ class AirMove:
             seg = self._straight(ctx, from_state, to_state, start_pose, ctx.start_contact.pose)
             if seg is not None:
                 yield seg
+            if _same_pose(start_pose, ctx.start):
+                yield from self._turned_downs(ctx, to_state, start_pose, limit)
         if to_state.is_free and ctx.goal_free:
             seg = self._straight(ctx, from_state, to_state, start_pose, ctx.goal)
             if seg is not None:
@@ -592,6 +601,62 @@ class AirMove:
             return None
         return Segment(self.name, from_state, to_state, translate(start_pose, d), 0.0, dist, ctx.world,
                        {"waypoints": _waypoints(start_pose, target), "travel": round(dist, 6)})
+
+    def _turned_downs(self, ctx: PlanningContext, to_state: ContactState, start_pose: Pose,
+                      limit: int) -> list[tuple[Segment, ...]]:
+        """Step 1 after a turn in the air, for an object held at the start: a turn about
+        its centre of mass by a multiple of ``STEP1_TURN_DEG`` (either way, up to a
+        quarter turn), then straight down until it touches, in ``to_state``. Only turns
+        through which the start grasp holds the object (every ``AIR_TURN_STEP_DEG``,
+        finger contacts sticking) and after which it clears the environment where the
+        object lands; the ``limit`` where that hold is firmest first (least reaction
+        angle: the least fraction of the friction it needs). A start hold at the edge of
+        its friction cone may not last the way down (task 1's inverse: wedged at 97 % of
+        the cone at -60 degrees, at 48 % at -75). None into a state with a face on a face
+        (it fixes the orientation); computed once per solve (``ctx.memo``)."""
+        g = ctx.start_grasp
+        if ctx.grasps is None or g is None or any(c.kind is ContactKind.EDGE_EDGE for c in to_state.contacts):
+            return []  # (a face on a face fixes the orientation: no turn lands there)
+        key = ("turned-downs", to_state, start_pose.as_array().tobytes(), limit)
+        if key not in ctx.memo:
+            ctx.memo[key] = self._turned_downs_of(ctx, to_state, start_pose, limit, g)
+        return ctx.memo[key]
+
+    def _turned_downs_of(self, ctx: PlanningContext, to_state: ContactState, start_pose: Pose, limit: int,
+                         g: int) -> list[tuple[Segment, ...]]:
+        from ldhp_tamp.contact_graph import ContactPoseError, contact_pose  # (it imports the registry)
+
+        assert ctx.grasps is not None
+        rows = np.array([g])
+        scored: list[tuple[float, float, tuple[Segment, ...]]] = []
+        for k in range(1, int(round(90.0 / STEP1_TURN_DEG)) + 1):
+            for sense in (-1, 1):
+                d = sense * math.radians(k * STEP1_TURN_DEG)
+                theta = start_pose.theta + d
+                if not motion_conditioned(ctx.world, ctx.grasps, _turn_path(ctx, start_pose.theta, theta, False),
+                                          rows, rate=False).indices.size:
+                    continue
+                turn = self._turn(ctx, start_pose, theta)
+                if turn is None or abs(float(wrap_angle(turn.s1 * turn.motion.sense - d))) > 1e-9:
+                    continue  # blocked the short way
+                try:  # Step 1 from the turned pose: the shortest axis translation into contact
+                    landing_pose = contact_pose(ctx.world, turn.end, ctx.reach)
+                except ContactPoseError:
+                    continue
+                if landing_pose.state != to_state or landing_pose.direction is None:
+                    continue
+                end = landing_pose.pose
+                grip = ctx.grasps.world_gripper(end.as_array(), rows)
+                if gripper_env_overlap(ctx.world, grip, ctx.grasps.width[rows]).any():
+                    continue
+                high = _turn_path(ctx, theta, theta, False)[:1]
+                alpha = float(motion_conditioned(ctx.world, ctx.grasps, high, rows).alpha[0])
+                landing = Segment(self.name, FREE, to_state, translate(turn.end, landing_pose.direction), 0.0,
+                                  landing_pose.travel, ctx.world,
+                                  {"waypoints": _waypoints(turn.end, end), "travel": round(landing_pose.travel, 6)})
+                scored.append((alpha, abs(d), (turn, landing)))
+        scored.sort(key=lambda x: (x[0], x[1]))
+        return [legs for _, _, legs in scored[:limit]]
 
     def _up(self, ctx: PlanningContext, from_state: ContactState, start_pose: Pose, height: float) -> Segment | None:
         """Straight up by ``height`` (at least AIR_PROBE_MM) out of ``from_state`` into

@@ -16,7 +16,7 @@ import pytest
 
 from geometry import mechanics
 from geometry.grasps import GraspOptions, enumerate_grasps, pose_conditioned
-from geometry.poses import Pose
+from geometry.poses import Pose, wrap_angle
 from ldhp_tamp.errors import InputError
 from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, AdjustGraspPrimitive
@@ -373,6 +373,8 @@ def test_pivot_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(scen
     members = rng.random(len(gs)) < 0.6
     src = np.flatnonzero(members & (rng.random(len(gs)) < 0.8))
     got = Pivot()._candidates(ctx, sc.start, src, members)
+    spins = np.abs(got[2]) != ag.ROLL_SENSE  # the rolls: test_a_round_finger_rolls_along_the_edge_it_touches
+    got = tuple(x[spins] for x in got)
     want = []  # the per-layer computation
     for k in range(2):
         a, b = _group_pairs(ctx.pivot_groups[k], src[gs.touching[src, k]])
@@ -567,3 +569,65 @@ def test_a_one_finger_grasp_changes_its_width_under_the_finger_that_holds(poly: 
     f = int(feasible.finger[sel[0]])
     assert len({w.finger_contacts[f] for w in step.waypoints}) == 1
     assert all(w.finger_contacts[1 - f] is None for w in step.waypoints)
+
+
+def test_a_round_finger_rolls_along_the_edge_it_touches(two_point: Case):
+    """Rolling pivots: the kept finger's contact moves along its edge by radius x turn
+    (the target's, within ROLL_TOL: the rest is slid), the motion ends on the target, and
+    the finger's contact slips only by that rest, along the edge."""
+    ctx, gs = two_point.ctx, two_point.grasps
+    r = float(two_point.world.gripper.finger_radius)
+    found = 0
+    for k in range(2):
+        a, b, delta, rad, resid = ag.Pivot._rolls(ctx, k)
+        found += a.size
+        assert (gs.feature[a, k] == gs.feature[b, k]).all() and (gs.feature[a, k] < gs.n_object).all()
+        np.testing.assert_allclose(gs.arclength[b, k] - gs.arclength[a, k] - r * delta, resid, atol=1e-9)
+        assert (np.abs(resid) <= ag.ROLL_TOL).all() and (np.abs(delta) > 0).all()
+    assert found
+    members = np.isin(np.arange(len(gs)), two_point.gt)
+    props = ag.Pivot().propose(ctx, T0, two_point.gt, members)
+    rolls = props.take(np.flatnonzero(np.abs(props.sense) == ag.ROLL_SENSE))
+    assert len(rolls)
+    smp = ag.sample_motion(ctx, ag.Pivot().motion(ctx, T0, rolls))
+    ends = np.flatnonzero(smp.last)
+    np.testing.assert_allclose(smp.pose[ends], gs.gripper[rolls.dst[smp.edge[ends]]], atol=1e-9)
+    i = np.flatnonzero(~smp.first & ~smp.last)
+    k = rolls.finger[smp.edge[i]]
+    # the slip direction (object relative to the finger) is along the edge, against the rest slid
+    turn = wrap_angle(gs.gripper[rolls.dst, 2] - gs.gripper[rolls.src, 2])
+    resid = (gs.arclength[rolls.dst, rolls.finger] - gs.arclength[rolls.src, rolls.finger] - r * turn)[smp.edge[i]]
+    mode = smp.mode[i, k]
+    assert (mode[np.abs(resid) < 1e-9] == mechanics.ContactMode.STICKING).all()
+    slipping = np.abs(resid) > 1e-6
+    assert (mode[slipping] == mechanics.ContactMode.SLIDING).all()
+    n = smp.normal[i, k][slipping]
+    assert np.allclose(np.einsum("ij,ij->i", n, smp.slide[i, k][slipping]), 0.0, atol=1e-9)
+
+
+def test_a_wedged_block_is_let_go_of_by_rolling_the_finger_under_it() -> None:
+    """Task 1's inverse: the block on its corner v2, tilted 75 degrees, wedged between the
+    zero-mobility gripper's fingers (finger 1 on the top corner, finger 2 under the long
+    side). Finger 2 and the table hold it alone (mu >= 0.12 of 0.2), but turning the
+    gripper about finger 2's centre makes its surface slip towards v2 and drag the block
+    that way, which the table's friction does not hold; turning the other way rolls
+    finger 1 into the corner. Rolling finger 2 along the side, it sticks: the rolls are
+    the only pivots that hold the block still."""
+    from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner
+    from ldhp_tamp.resources import scenarios_dir
+    from ldhp_tamp.scenario import load_scenario
+
+    sc = load_scenario(scenarios_dir() / "inv_place_release.toml")
+    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=100))
+    planner = GraspPlanner(sc.world, gs, [REGISTRY.binding("pivot")], sc.start_grasp, True,
+                           GraspGraphOptions(helper=False))
+    planner.prepare(sc.start.as_array())
+    ctx, start = planner.context, int(planner.start_index)
+    th = math.radians(-75.0)
+    pose = Pose(70.0 - 70.0 * math.cos(th), -70.0 * math.sin(th), th)  # v2 at (70, 0)
+    members = np.zeros(len(ctx.grasps), dtype=bool)
+    members[planner.pose_grasps(pose.as_array())] = True
+    feasible = ag.Pivot().intra_edges(ctx, pose, np.flatnonzero(members | (np.arange(len(members)) == start)))
+    from_start = feasible.take(np.flatnonzero(feasible.src == start))
+    assert len(from_start) and (np.abs(from_start.sense) == ag.ROLL_SENSE).all()
+    assert (from_start.finger == 1).all()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from geometry.poses import Pose
@@ -133,3 +134,36 @@ def test_two_fingers_on_a_corner_of_a_gripper_that_closes_are_left_to_the_grip_f
     rigid = load_scenario_string(SQUARE_BLOCK.format(lo=w, hi=w), "square-block")
     report = forward_check(plan, rigid)
     assert not report.ok and report.step == 0 and report.waypoint == 0, report.reason
+
+
+def test_a_finger_rolling_on_the_object_is_seen_rolling() -> None:
+    """A rolling pivot (task 1's inverse, the block on its corner at 75 degrees, finger 2
+    rolling along the long side under it while finger 1 lets go): the object stays still.
+    Between two waypoints the gripper's screw turns about a point half a step ahead of the
+    contact, so the displacement to the next waypoint alone has the finger's surface leave
+    the object by radius x turn^2 / 2, and the block following it balances too; the motion
+    from the previous waypoint to the next is centred on the contact."""
+    from geometry.grasps import GraspOptions, enumerate_grasps
+    from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner
+    from ldhp_tamp.primitives import REGISTRY
+    from ldhp_tamp.primitives import adjust_grasp as ag
+    from ldhp_tamp.resources import scenarios_dir
+
+    sc = load_scenario(scenarios_dir() / "inv_place_release.toml")
+    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=100))
+    planner = GraspPlanner(sc.world, gs, [REGISTRY.binding("pivot")], sc.start_grasp, True,
+                           GraspGraphOptions(helper=False))
+    planner.prepare(sc.start.as_array())
+    ctx, start = planner.context, int(planner.start_index)
+    th = math.radians(-75.0)
+    pose = Pose(70.0 - 70.0 * math.cos(th), -70.0 * math.sin(th), th)  # on its corner v2 = (70, 0)
+    rows = np.union1d(planner.pose_grasps(pose.as_array()), [start])
+    edges = ag.Pivot().intra_edges(ctx, pose, rows)
+    rolls = np.flatnonzero((edges.src == start) & (np.abs(edges.sense) == ag.ROLL_SENSE))
+    assert rolls.size
+    i = int(rolls[0])
+    step = Step("pivot", Family.ADJUST_GRASP, ag.Pivot().parameters(ctx, edges, i), ("v2-e1", "v2-e1"),
+                ag.Pivot().waypoints(ctx, pose, edges, i))
+    plan = Plan(PLAN_FORMAT, sc.name, sc.sha256, PlanStatus.SOLVED, (step,), PlanStats())
+    report = forward_check(plan, sc)
+    assert report.checked > 0 and report.ok, report.reason

@@ -133,9 +133,9 @@ def test_bench_cli_refuses_an_unknown_planner(tmp_path: Path, capsys: pytest.Cap
 
 
 def test_without_feedback_nothing_is_forbidden_and_the_symbolic_tier_replans_blind() -> None:
-    sc = load_scenario(scenarios_dir() / "task1_zero_mobility_lift.toml")  # its first iterations fail
-    with_feedback = get_planner("ldhp")(sc, SolveOptions(max_top_iterations=2))
-    blind = get_planner("ldhp-nofeedback")(sc, SolveOptions(max_top_iterations=2))
+    sc = load_scenario(scenarios_dir() / "task1_zero_mobility_lift.toml")  # without refinement its first iterations fail
+    with_feedback = get_planner("ldhp")(sc, SolveOptions(max_top_iterations=2, max_refinements=0))
+    blind = get_planner("ldhp-nofeedback")(sc, SolveOptions(max_top_iterations=2, max_refinements=0))
     assert with_feedback.plan.failure is not None and blind.plan.failure is not None
     assert with_feedback.plan.failure.counts["forbidden"] > 0
     assert blind.plan.failure.counts["forbidden"] == 0 and blind.plan.stats.top_iterations == 2

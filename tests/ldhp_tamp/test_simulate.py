@@ -369,3 +369,30 @@ def test_cli_bad_input_exits_2(case: str, tmp_path: Path, capsys: pytest.Capture
     err = capsys.readouterr().err
     assert "Traceback" not in err
     assert err.startswith("error: ") and Path(named).name in err
+
+
+def test_a_rigid_wedge_hold_at_the_edge_of_its_cone_is_not_dropped_at_the_start() -> None:
+    """Task 1's inverse starts wedged between rigid fingers at 97 % of the friction cone
+    (the hold needs mu 0.1946 of 0.2). The replay starts with the object free, settling
+    into its contacts with the hand: pinned first (as for finger drives that close), its
+    contacts carried nothing when let go, it dropped into them and slid out at once. Here
+    the hand turns it 3 degrees about its centre of mass to a firmer hold (0.18)."""
+    from ldhp_tamp.plan import PLAN_FORMAT, Family, Plan, PlanStats, PlanStatus, Step, Waypoint
+
+    sc = load_scenario(REPO / "scenarios" / "inv_place_release.toml")
+    rel = sc.start.inverse().compose(sc.start_grasp.pose)
+    com = sc.start.apply(sc.world.object.com)
+    wps = []
+    for k in range(4):
+        d = -math.radians(1.0) * k
+        c, s = math.cos(d), math.sin(d)
+        dx, dy = sc.start.x - com[0], sc.start.y - com[1]
+        obj = Pose(float(com[0] + c * dx - s * dy), float(com[1] + s * dx + c * dy), sc.start.theta + d)
+        grip = obj.compose(rel)
+        pts = [obj.apply((0.0, 149.981056)), obj.apply((70.0, 108.75))]  # finger 1 on l4 at v4, finger 2 under l2
+        wps.append(Waypoint(obj, grip, 90.0, tuple((float(p[0]), float(p[1])) for p in pts)))
+    plan = Plan(PLAN_FORMAT, sc.name, sc.sha256, PlanStatus.SOLVED,
+                (Step("air-move", Family.MOVE_OBJECT, {}, ("free", "free"), tuple(wps)),), PlanStats())
+    report = simulate_plan(plan, sc)
+    assert len(report.records) == 4
+    assert max(r.position_error_mm for r in report.records) < 1.0

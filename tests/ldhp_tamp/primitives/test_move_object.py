@@ -208,3 +208,41 @@ def test_a_placement_turns_the_object_to_the_goal_first() -> None:
     assert end.y == pytest.approx(peg.goal.y, abs=0.1)
     for seg in legs:
         assert not object_env_overlap(peg.world, seg.poses[:-1]).any()
+
+
+def test_step1_may_turn_a_held_object_first_to_where_its_hold_is_firmer() -> None:
+    """Task 1's inverse starts wedged in the air at -60 degrees, a hold that needs mu
+    0.1946 of 0.2 (less the further it is tilted: 0.13 at -70, 0.06 at -80). Step 1 is
+    the straight translation down first; then the same landing in v2-e1 after a turn
+    about the centre of mass, only those the start grasp holds all the way through
+    (clockwise: counter-clockwise it needs more friction) and that leave the gripper clear
+    of the table where the block lands, the firmest first."""
+    from geometry.grasps import motion_conditioned
+    from geometry.poses import wrap_angle
+    from ldhp_tamp.primitives import Family
+    from ldhp_tamp.primitives.move_object import STEP1_TURN_DEG, _turn_path
+    from ldhp_tamp.symbolic import load_checked_domain
+
+    sc = load_scenario(scenarios_dir() / "inv_place_release.toml")
+    domain = load_checked_domain(sc.settings.domain, sc.settings.engine, REGISTRY)
+    ctx = build_context(sc.world, sc.start, sc.goal)
+    planner = GraspPlanner(sc.world, enumerate_grasps(sc.world, GraspOptions(samples_per_edge=K)),
+                           REGISTRY.bound(domain.info, Family.ADJUST_GRASP), sc.start_grasp, True)
+    planner.prepare(ctx.start.as_array())
+    held = replace(ctx, grasps=planner.grasps, start_grasp=int(planner.start_index))
+    v2 = ctx.start_contact.state
+    plain = list(AirMove().sample(ctx, FREE, v2, ctx.start, np.random.default_rng(0), 3))
+    samples = list(AirMove().sample(held, FREE, v2, ctx.start, np.random.default_rng(0), 3))
+    assert len(plain) == 1 and len(samples) == 4  # the straight one, then three turned
+    assert samples[0].end.distance(ctx.start_contact.pose)[0] < 1e-9
+    alphas = []
+    for turn, landing in samples[1:]:
+        check_joined((turn, landing))
+        d = math.degrees(float(wrap_angle(turn.end.theta - ctx.start.theta)))
+        assert d < 0 and abs(d / STEP1_TURN_DEG - round(d / STEP1_TURN_DEG)) < 1e-9 and abs(d) <= 90.0
+        assert landing.to_state == v2 and landing.end.theta == pytest.approx(turn.end.theta)
+        grip = held.grasps.world_gripper(landing.end.as_array(), np.array([held.start_grasp]))
+        assert not gripper_env_overlap(sc.world, grip, held.grasps.width[[held.start_grasp]]).any()
+        high = _turn_path(held, turn.end.theta, turn.end.theta, False)[:1]
+        alphas.append(float(motion_conditioned(sc.world, held.grasps, high, np.array([held.start_grasp])).alpha[0]))
+    assert alphas == sorted(alphas)
