@@ -298,17 +298,27 @@ def _last_true(pred: Callable[[FloatArray], NDArray[np.bool_]], lo: float, hi: f
     A batched multisection: each round evaluates ``width`` points at once (one vectorised
     call) and keeps the sub-interval where the predicate turns false.
     """
+    return _last_true_many(lambda xs: [pred(xs[0])], [lo], [hi], bits, width)[0]
+
+
+def _last_true_many(pred: Callable[[list[FloatArray]], list[NDArray[np.bool_]]], lo: Sequence[float],
+                    hi: Sequence[float], bits: int, width: int = 64) -> list[float]:
+    """:func:`_last_true` of several intervals at once: ``pred`` takes the points of
+    every interval (a list of arrays) and answers for each, in one call per round."""
+    lo, hi = [float(v) for v in lo], [float(v) for v in hi]
     rounds = max(1, int(math.ceil(bits / math.log2(width + 1))))
     for _ in range(rounds):
-        x = np.linspace(lo, hi, width + 2)[1:-1]
-        ok = pred(x)
-        bad = np.flatnonzero(~ok)
-        if bad.size == 0:
-            lo = float(x[-1])
-        else:
-            i = int(bad[0])
-            hi = float(x[i])
-            lo = float(x[i - 1]) if i > 0 else lo
+        if not lo:
+            break
+        xs = [np.linspace(a, b, width + 2)[1:-1] for a, b in zip(lo, hi)]
+        for k, (x, ok) in enumerate(zip(xs, pred(xs))):
+            bad = np.flatnonzero(~ok)
+            if bad.size == 0:
+                lo[k] = float(x[-1])
+            else:
+                i = int(bad[0])
+                hi[k] = float(x[i])
+                lo[k] = float(x[i - 1]) if i > 0 else lo[k]
     return lo
 
 
@@ -332,70 +342,158 @@ def sweep(
     contact is made. Every state change inside the walk is refined likewise (to half the
     digits), so piece boundaries are accurate. States are identified in batched calls.
     """
-    overlap = overlap_fn or _default_overlap
-    s = _grid(world, motion, 0.0, s_max, step_mm)
+    return sweep_many(world, [(motion, s_max)], overlap_fn, step_mm=step_mm, refine_bits=refine_bits, tol=tol)[0]
 
-    def good_at(x: FloatArray) -> NDArray[np.bool_]:
-        p = motion.poses(x)
-        ok = np.all(np.isfinite(p), axis=1)
-        safe = np.where(np.isfinite(p), p, 0.0)
-        for c in motion.kept:
-            ok &= kept_contact_holds(world, c, safe)
-        idx = np.flatnonzero(ok)
-        if idx.size:
-            ok[idx] = ~overlap(world, p[idx])
-        return ok
+
+def sweep_many(
+    world: World,
+    jobs: Sequence[tuple[Motion, float]],
+    overlap_fn: OverlapFn | None = None,
+    *,
+    step_mm: float = 1.0,
+    refine_bits: int = 24,
+    tol: float = CONTACT_TOL,
+) -> list[Sweep]:
+    """:func:`sweep` of each ``(motion, s_max)``, the sweeps walked side by side.
+
+    The same sweeps, computed by the same numbers: each stage (the walk's chunks, the
+    refinement of the ends, the states, the refinement of the piece boundaries) runs
+    over every sweep at once, in one overlap test and one contact identification per
+    round instead of one per sweep (``overlap_fn`` must decide each pose on its own, as
+    :func:`geometry.collision.object_env_overlap` does). The sweeps of a solve's setup
+    are hundreds of small ones, whose cost is mostly the calls' own.
+    """
+    if not jobs:
+        return []
+    overlap = overlap_fn or _default_overlap
+    motions = [m for m, _ in jobs]
+    grids = [_grid_poses(world, m, 0.0, s_max, step_mm) for m, s_max in jobs]
+
+    def good(which: Sequence[int], poses: Sequence[FloatArray]) -> list[NDArray[np.bool_]]:
+        """Whether each pose of ``poses[i]`` (motion ``which[i]``) is finite, keeps the
+        motion's contacts and does not overlap (one overlap call for all)."""
+        oks, todo = [], []
+        for k, p in zip(which, poses):
+            ok = np.all(np.isfinite(p), axis=1)
+            safe = np.where(np.isfinite(p), p, 0.0)
+            for c in motions[k].kept:
+                ok &= kept_contact_holds(world, c, safe)
+            oks.append(ok)
+            todo.append(np.flatnonzero(ok))
+        sizes = [idx.size for idx in todo]
+        if sum(sizes):
+            hit = overlap(world, np.concatenate([p[idx] for p, idx in zip(poses, todo)]))
+            at = 0
+            for ok, idx, n in zip(oks, todo, sizes):
+                ok[idx] = ~hit[at:at + n]
+                at += n
+        return oks
 
     # Walk in chunks that double, stopping at the first bad sample: most sweeps end (a
     # new contact, a kept contact lost) long before s_max, and a two-contact motion's
     # speed bound can make s_max thousands of samples.
-    first_bad: int | None = None
-    i, size = 0, 64
-    while i < s.size:
-        j = min(s.size, i + size)
-        ok = good_at(s[i:j])
-        if not ok.all():
-            first_bad = i + int(np.argmin(ok))
-            break
-        i, size = j, 2 * size
-    if first_bad == 0:
-        _, masks = _state_keys(world, motion.start.as_array()[None], tol)
-        return Sweep(motion, (SweepPiece(masks.state(0), 0.0, 0.0),), SweepEnd.BLOCKED)  # type: ignore[attr-defined]
-    if first_bad is None:
-        end = SweepEnd.LIMIT
-        poses = motion.poses(s)
-    else:
-        p_bad = motion.poses(s[first_bad:first_bad + 1])[0]
-        if not np.all(np.isfinite(p_bad)):
-            end = SweepEnd.DEGENERATE
-        elif any(not kept_contact_holds(world, c, p_bad[None])[0] for c in motion.kept):
-            end = SweepEnd.CONTACT_LOST
-        else:
-            end = SweepEnd.BLOCKED
-        lo = _last_true(good_at, float(s[first_bad - 1]), float(s[first_bad]), refine_bits)
-        s = np.concatenate([s[:first_bad], [lo]]) if lo > s[first_bad - 1] else s[:first_bad]
-        poses = motion.poses(s)
-    keys, masks = _state_keys(world, poses, tol)
-    pieces: list[SweepPiece] = []
-    start_i = 0
-    s0 = 0.0
-    for i in range(1, len(s) + 1):
-        if i < len(s) and keys[i] == keys[start_i]:
+    first_bad: list[int | None] = [None] * len(jobs)
+    at = [0] * len(jobs)
+    size = [64] * len(jobs)
+    walking = [k for k in range(len(jobs)) if grids[k][0].size]
+    while walking:
+        ends = [min(grids[k][0].size, at[k] + size[k]) for k in walking]
+        oks = good(walking, [grids[k][1][at[k]:j] for k, j in zip(walking, ends)])
+        still = []
+        for k, j, ok in zip(walking, ends, oks):
+            if not ok.all():
+                first_bad[k] = at[k] + int(np.argmin(ok))
+                continue
+            at[k], size[k] = j, 2 * size[k]
+            if at[k] < grids[k][0].size:
+                still.append(k)
+        walking = still
+
+    # Why each sweep ends, and where exactly (one multisection for all).
+    end: list[SweepEnd] = [SweepEnd.LIMIT] * len(jobs)
+    refine = [k for k in range(len(jobs)) if first_bad[k] is not None and first_bad[k] > 0]
+    for k in range(len(jobs)):
+        fb = first_bad[k]
+        if fb is None:
             continue
-        state = masks.state(start_i)  # type: ignore[attr-defined]
-        if i == len(s):
-            pieces.append(SweepPiece(state, s0, float(s[-1])))
-            break
-        key = keys[start_i]
+        if fb == 0:
+            end[k] = SweepEnd.BLOCKED
+            continue
+        p_bad = grids[k][1][fb]
+        if not np.all(np.isfinite(p_bad)):
+            end[k] = SweepEnd.DEGENERATE
+        elif any(not kept_contact_holds(world, c, p_bad[None])[0] for c in motions[k].kept):
+            end[k] = SweepEnd.CONTACT_LOST
+        else:
+            end[k] = SweepEnd.BLOCKED
+    last = _last_true_many(
+        lambda xs: good(refine, [motions[k].poses(x) for k, x in zip(refine, xs)]),
+        [float(grids[k][0][first_bad[k] - 1]) for k in refine],  # type: ignore[operator]
+        [float(grids[k][0][first_bad[k]]) for k in refine], refine_bits)  # type: ignore[index]
+    last_of = dict(zip(refine, last))
+    params: list[FloatArray] = []
+    poses: list[FloatArray] = []
+    for k in range(len(jobs)):
+        s, p = grids[k]
+        fb = first_bad[k]
+        if fb == 0:  # blocked at once: the state of the start
+            params.append(np.zeros(0))
+            poses.append(motions[k].start.as_array()[None])
+        elif fb is None:
+            params.append(s)
+            poses.append(p)
+        else:
+            lo = last_of[k]
+            if lo > s[fb - 1]:
+                params.append(np.concatenate([s[:fb], [lo]]))
+                poses.append(np.concatenate([p[:fb], motions[k].poses([lo])]))
+            else:
+                params.append(s[:fb])
+                poses.append(p[:fb])
 
-        def same(x: FloatArray, key: bytes = key) -> NDArray[np.bool_]:
-            return np.array([k == key for k in _state_keys(world, motion.poses(x), tol)[0]])
+    # The states along every sweep (one identification), and where they change.
+    offsets = np.concatenate([[0], np.cumsum([p.shape[0] for p in poses])])
+    keys, masks = _state_keys(world, np.concatenate(poses), tol)
+    changes: list[tuple[int, int, int]] = []  # (sweep, first sample of the new state, first of the old)
+    for k in range(len(jobs)):
+        if first_bad[k] == 0:
+            continue
+        o, n = int(offsets[k]), params[k].size
+        start_i = 0
+        for i in range(1, n):
+            if keys[o + i] != keys[o + start_i]:
+                changes.append((k, i, start_i))
+                start_i = i
 
-        boundary = _last_true(same, float(s[i - 1]), float(s[i]), refine_bits // 2)
-        pieces.append(SweepPiece(state, s0, boundary))
-        s0 = boundary
-        start_i = i
-    return Sweep(motion, tuple(pieces), end)
+    def same(xs: list[FloatArray]) -> list[NDArray[np.bool_]]:
+        placed = [motions[k].poses(x) for (k, _, _), x in zip(changes, xs)]
+        got = _state_keys(world, np.concatenate(placed), tol)[0] if placed else []
+        out, at = [], 0
+        for (k, _, start_i), p in zip(changes, placed):
+            key = keys[int(offsets[k]) + start_i]
+            out.append(np.array([g == key for g in got[at:at + p.shape[0]]]))
+            at += p.shape[0]
+        return out
+
+    bounds = _last_true_many(same, [float(params[k][i - 1]) for k, i, _ in changes],
+                             [float(params[k][i]) for k, i, _ in changes], refine_bits // 2)
+    out: list[Sweep] = []
+    c = 0
+    for k in range(len(jobs)):
+        o = int(offsets[k])
+        if first_bad[k] == 0:
+            out.append(Sweep(motions[k], (SweepPiece(masks.state(o), 0.0, 0.0),), end[k]))  # type: ignore[attr-defined]
+            continue
+        pieces: list[SweepPiece] = []
+        s0, start_i = 0.0, 0
+        while c < len(changes) and changes[c][0] == k:
+            _, i, _ = changes[c]
+            pieces.append(SweepPiece(masks.state(o + start_i), s0, bounds[c]))  # type: ignore[attr-defined]
+            s0, start_i = bounds[c], i
+            c += 1
+        pieces.append(SweepPiece(masks.state(o + start_i), s0, float(params[k][-1])))  # type: ignore[attr-defined]
+        out.append(Sweep(motions[k], tuple(pieces), end[k]))
+    return out
 
 
 #: A two-contact motion's grid starts at most this fast (object radii of vertex motion
@@ -409,11 +507,25 @@ MAX_GRID_SAMPLES = 20_000
 def _vertex_steps(world: World, poses: FloatArray) -> FloatArray:
     """(n - 1,) the largest object-vertex displacement between consecutive poses (NaN
     where a pose is undefined)."""
+    wx, wy = _placed_vertices(world, poses)
+    return np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)
+
+
+def _placed_vertices(world: World, poses: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The object's vertices at each pose: world x and y, (n, N) each."""
     verts = world.object.polygon.vertices
     c, sn = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     wx = c[:, None] * verts[None, :, 0] - sn[:, None] * verts[None, :, 1] + poses[:, 0:1]
     wy = sn[:, None] * verts[None, :, 0] + c[:, None] * verts[None, :, 1] + poses[:, 1:2]
-    return np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)
+    return wx, wy
+
+
+def _pair_steps(world: World, a: FloatArray, b: FloatArray) -> FloatArray:
+    """(k,) the largest object-vertex displacement from pose ``a[i]`` to ``b[i]``: the
+    numbers :func:`_vertex_steps` gives for ``a[i], b[i]`` as consecutive poses."""
+    ax, ay = _placed_vertices(world, a)
+    bx, by = _placed_vertices(world, b)
+    return np.max(np.hypot(bx - ax, by - ay), axis=1)
 
 
 def _grid(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> FloatArray:
@@ -425,22 +537,56 @@ def _grid(world: World, motion: Motion, s0: float, s1: float, step_mm: float) ->
     ``TWO_CONTACT_SPEED_CAP`` radii per radian), every interval that still moves a vertex
     too far halved, round after round.
     """
+    return _grid_poses(world, motion, s0, s1, step_mm)[0]
+
+
+def _grid_poses(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> tuple[FloatArray, FloatArray]:
+    """:func:`_grid`'s parameter values and the motion's poses at them, (n,) and (n, 3).
+
+    The rounds of halving, computed on the intervals still too long only: an interval
+    that moves no vertex too far is never halved again, and one with an undefined end
+    never is, nor is any interval after the first such (the grid is not refined past a
+    singularity). Each round places only its new midpoints; every number is computed
+    elementwise, so the grid and its poses are those of halving the whole grid round
+    after round.
+    """
     speed = max(motion.vertex_speed(world), EPS)
     if motion.kind is MotionKind.TWO_CONTACT:
         speed = min(speed, TWO_CONTACT_SPEED_CAP * world.object.polygon.radius)
     n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))
     s = np.linspace(s0, s1, n + 1)
+    p = motion.poses(s)
+    d = _vertex_steps(world, p)
+    undefined = np.flatnonzero(~np.isfinite(d))
+    first_undefined = float(s[undefined[0]]) if undefined.size else math.inf  # its start
+    k = np.flatnonzero(d > step_mm)
+    a, b, pa, pb = s[k], s[k + 1], p[k], p[k + 1]  # the intervals still too long
+    new_s: list[FloatArray] = [s]
+    new_p: list[FloatArray] = [p]
+    size = s.size
     for _ in range(40):
-        d = _vertex_steps(world, motion.poses(s))
-        undefined = np.flatnonzero(~np.isfinite(d))
-        stop = int(undefined[0]) if undefined.size else d.size  # no refining past a singularity
-        too_far = np.zeros(d.size, dtype=bool)
-        too_far[:stop] = d[:stop] > step_mm
-        if not np.any(too_far) or s.size >= MAX_GRID_SAMPLES:
-            return s
-        mids = 0.5 * (s[:-1][too_far] + s[1:][too_far])
-        s = np.sort(np.concatenate([s, mids]))
-    return s
+        before = a < first_undefined
+        if not np.any(before) or size >= MAX_GRID_SAMPLES:
+            break
+        a, b, pa, pb = a[before], b[before], pa[before], pb[before]
+        mids = 0.5 * (a + b)
+        pm = motion.poses(mids)
+        left, right = _pair_steps(world, pa, pm), _pair_steps(world, pm, pb)
+        new_s.append(mids)
+        new_p.append(pm)
+        size += mids.size
+        for starts, steps in ((a, left), (mids, right)):
+            bad = ~np.isfinite(steps)
+            if bad.any():
+                first_undefined = min(first_undefined, float(starts[bad].min()))
+        lf, rf = left > step_mm, right > step_mm
+        a, b = np.concatenate([a[lf], mids[rf]]), np.concatenate([mids[lf], b[rf]])
+        pa, pb = np.concatenate([pa[lf], pm[rf]]), np.concatenate([pm[lf], pb[rf]])
+    if len(new_s) == 1:
+        return s, p
+    s, p = np.concatenate(new_s), np.concatenate(new_p)
+    order = np.argsort(s, kind="stable")
+    return s[order], p[order]
 
 
 def dense_parameters(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> FloatArray:

@@ -50,15 +50,17 @@ def cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None) -> list[R]:
-    """``[fn(x) for x in items]``, spread over ``jobs`` processes (default: the cores).
+def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, *,
+             min_items_per_core: int = MIN_ITEMS_PER_CORE) -> list[R]:
+    """``[fn(x) for x in items]``, spread over ``jobs`` processes (default: the cores),
+    each with at least ``min_items_per_core`` items (fewer processes otherwise).
 
     Item i goes to process ``i % jobs`` (the parent is process 0), so that neighbouring
     items, which tend to cost alike, are spread out.
     """
     items = list(items)
     jobs = cores() if jobs is None else max(1, int(jobs))
-    jobs = min(jobs, len(items) // MIN_ITEMS_PER_CORE)
+    jobs = min(jobs, len(items) // max(1, int(min_items_per_core)))
     if jobs <= 1 or not hasattr(os, "fork"):
         return [fn(x) for x in items]
     children: list[tuple[int, int]] = []  # (pid, read end)

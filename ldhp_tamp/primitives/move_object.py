@@ -28,7 +28,7 @@ from geometry.contacts import contact_points, contact_state, principal_contacts
 from geometry.collision import gripper_env_overlap
 from geometry.grasps import motion_conditioned
 from geometry.features import FREE, Contact, ContactKind, ContactState
-from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, SweepPiece, kept_contact_holds, rotate_about, sweep, translate, two_contact
+from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, SweepPiece, kept_contact_holds, rotate_about, sweep, sweep_many, translate, two_contact
 from geometry.poses import Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL
 from geometry.world import PolylineGripper, TwoPointGripper, World
@@ -49,6 +49,10 @@ MARGIN_MM = 2.0
 #: Sampling step (mm of vertex motion) of the sweeps that find admissible transitions:
 #: coarser than a stream's, since only the order of the states met matters there.
 TRANSITION_STEP_MM = 3.0
+#: Sweeps walked side by side (:func:`geometry.kinematics.sweep_many`) when finding the
+#: admissible transitions, and how many such batches make a forked process worth it.
+TRANSITION_BATCH = 64
+TRANSITION_BATCHES_PER_CORE = 2
 
 #: Largest orientation error (mm of vertex motion at the object's radius) an air-move
 #: leaves at its end: the in-state alignment's tolerance, far below the plan spec's 1 mm.
@@ -149,7 +153,8 @@ class _Swept:
         raise NotImplementedError
 
     def transitions(self, ctx: PlanningContext) -> set[tuple[ContactState, ContactState]]:
-        # One sweep per (witness pose, motion family), independent of each other: on the
+        # One sweep per (witness pose, motion family), independent of each other: swept
+        # side by side in batches (geometry.kinematics.sweep_many), the batches on the
         # machine's cores (ldhp_tamp.parallel; the same pairs on any number of them).
         where = f"the setup ({self.name} transitions)"
         motions = []
@@ -161,23 +166,30 @@ class _Swept:
 
         nodes = ctx.state_set
 
-        def pairs_from(job: tuple[Motion, float]) -> set[tuple[ContactState, ContactState]]:
+        def pairs_from(jobs: list[tuple[Motion, float]]) -> set[tuple[ContactState, ContactState]]:
             budget.check(ctx.deadline, where)
-            sw = sweep(ctx.world, job[0], job[1], step_mm=TRANSITION_STEP_MM, refine_bits=10)
-            found = _consecutive_pairs(sw)
-            transit = _transit(sw, nodes)
-            if transit is not None:  # on through a vertex-on-vertex instant, under another motion law
-                a, x, s_x = transit
-                pose = sw.motion.pose(s_x)
-                for motion, s_max, _ in self.families(ctx, pose):
-                    after = sweep(ctx.world, motion, s_max, step_mm=TRANSITION_STEP_MM, refine_bits=10)
-                    b = _onward(ctx.world, after, x, nodes)
-                    if b is not None and b != a:
-                        found.add((a, b))
+            found: set[tuple[ContactState, ContactState]] = set()
+            onward: list[tuple[Motion, float]] = []
+            onward_of: list[tuple[ContactState, ContactState]] = []  # (a, x) of each onward job
+            for sw in sweep_many(ctx.world, jobs, step_mm=TRANSITION_STEP_MM, refine_bits=10):
+                found |= _consecutive_pairs(sw)
+                transit = _transit(sw, nodes)
+                if transit is not None:  # on through a vertex-on-vertex instant, under another motion law
+                    a, x, s_x = transit
+                    for motion, s_max, _ in self.families(ctx, sw.motion.pose(s_x)):
+                        onward.append((motion, s_max))
+                        onward_of.append((a, x))
+            budget.check(ctx.deadline, where)
+            for (a, x), after in zip(onward_of, sweep_many(ctx.world, onward, step_mm=TRANSITION_STEP_MM,
+                                                           refine_bits=10)):
+                b = _onward(ctx.world, after, x, nodes)
+                if b is not None and b != a:
+                    found.add((a, b))
             return found
 
+        batches = [motions[k:k + TRANSITION_BATCH] for k in range(0, len(motions), TRANSITION_BATCH)]
         pairs: set[tuple[ContactState, ContactState]] = set()
-        for found in fork_map(pairs_from, motions):
+        for found in fork_map(pairs_from, batches, min_items_per_core=TRANSITION_BATCHES_PER_CORE):
             pairs |= found
         return pairs
 
@@ -554,11 +566,15 @@ class AirMove:
             pairs.add((FREE, ctx.goal_contact.state))  # placed from above
         if not ctx.goal_free and (FREE, ctx.goal_contact.state) not in pairs:
             return pairs  # free space leads nowhere nearer the goal: no lift is worth admitting
-        for state in ctx.states:
-            if state.is_free or (state, FREE) in pairs:
-                continue
-            budget.check(ctx.deadline, "the setup (air-move transitions)")
-            if any(_leaves_to_free(ctx, w, state, up) and _carriable(ctx, w) for w in _lift_witnesses(ctx, state)):
+        where = "the setup (air-move transitions)"
+        budget.check(ctx.deadline, where)
+        lifts = [(state, _lift_witnesses(ctx, state)) for state in ctx.states
+                 if not state.is_free and (state, FREE) not in pairs]
+        leaves = iter(_leave_to_free(ctx, [(w, state) for state, ws in lifts for w in ws], up))
+        for state, witnesses in lifts:
+            budget.check(ctx.deadline, where)
+            up_ok = [next(leaves) for _ in witnesses]  # the probes, swept side by side beforehand
+            if any(ok and _carriable(ctx, w) for ok, w in zip(up_ok, witnesses)):
                 pairs.add((state, FREE))  # lifted straight up
         return pairs
 
@@ -868,5 +884,13 @@ def _carriable(ctx: PlanningContext, pose: Pose) -> bool:
 
 def _leaves_to_free(ctx: PlanningContext, pose: Pose, state: ContactState, direction: tuple[float, float]) -> bool:
     """Whether a translation from ``pose`` (in ``state``) goes straight into free space."""
-    sw = sweep(ctx.world, translate(pose, direction), AIR_PROBE_MM, step_mm=1.0, refine_bits=10)
-    return sw.end is SweepEnd.LIMIT and sw.states[0] == state and sw.states[-1] == FREE and len(sw.states) == 2
+    return _leave_to_free(ctx, [(pose, state)], direction)[0]
+
+
+def _leave_to_free(ctx: PlanningContext, starts: list[tuple[Pose, ContactState]],
+                   direction: tuple[float, float]) -> list[bool]:
+    """:func:`_leaves_to_free` of each (pose, state), the probes swept side by side."""
+    sweeps = sweep_many(ctx.world, [(translate(pose, direction), AIR_PROBE_MM) for pose, _ in starts],
+                        step_mm=1.0, refine_bits=10)
+    return [sw.end is SweepEnd.LIMIT and sw.states[0] == state and sw.states[-1] == FREE and len(sw.states) == 2
+            for (_, state), sw in zip(starts, sweeps)]

@@ -49,6 +49,15 @@ def test_few_items_stay_in_the_parent() -> None:
 
 
 @needs_fork
+def test_fewer_items_per_core_may_be_asked_for() -> None:
+    """A few large items (the setup's batches of sweeps) are shared out too."""
+    items = list(range(6))
+    assert len(set(fork_map(lambda x: os.getpid(), items, 2, min_items_per_core=3))) == 2
+    assert fork_map(lambda x: x * x, items, 2, min_items_per_core=3) == [x * x for x in items]
+    assert set(fork_map(lambda x: os.getpid(), items, 2, min_items_per_core=4)) == {os.getpid()}
+
+
+@needs_fork
 def test_a_childs_exception_is_raised_in_the_parent() -> None:
     before = _children()
     def fail_on(bad: int):
