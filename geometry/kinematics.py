@@ -246,14 +246,20 @@ def _default_overlap(world: World, poses: FloatArray) -> NDArray[np.bool_]:
 
 def _state_keys(world: World, poses: FloatArray, tol: float) -> tuple[list[bytes], object]:
     """A hashable key per pose (packed principal-contact masks) and the masks."""
+    packed, m = _state_rows(world, poses, tol)
+    return [row.tobytes() for row in packed], m
+
+
+def _state_rows(world: World, poses: FloatArray, tol: float) -> tuple[NDArray[np.uint8], object]:
+    """The packed principal-contact masks of each pose, (n, bytes): equal rows, equal
+    states (the rows of :func:`_state_keys`), and the masks."""
     from geometry.contacts import principal_contact_masks
 
     m = principal_contact_masks(world, poses, tol)
     flat = np.concatenate(
         [m.vertex_edge.reshape(len(poses), -1), m.edge_vertex.reshape(len(poses), -1),
          m.edge_edge.reshape(len(poses), -1)], axis=1)
-    packed = np.packbits(flat, axis=1)
-    return [row.tobytes() for row in packed], m
+    return np.packbits(flat, axis=1), m
 
 
 def kept_contact_holds(world: World, contact: Contact, poses: FloatArray, tol: float = CONTACT_TOL) -> NDArray[np.bool_]:
@@ -367,7 +373,7 @@ def sweep_many(
         return []
     overlap = overlap_fn or _default_overlap
     motions = [m for m, _ in jobs]
-    grids = [_grid_poses(world, m, 0.0, s_max, step_mm) for m, s_max in jobs]
+    grids = [_Grid(world, m, 0.0, s_max, step_mm) for m, s_max in jobs]
 
     def good(which: Sequence[int], poses: Sequence[FloatArray]) -> list[NDArray[np.bool_]]:
         """Whether each pose of ``poses[i]`` (motion ``which[i]``) is finite, keeps the
@@ -395,17 +401,19 @@ def sweep_many(
     first_bad: list[int | None] = [None] * len(jobs)
     at = [0] * len(jobs)
     size = [64] * len(jobs)
-    walking = [k for k in range(len(jobs)) if grids[k][0].size]
+    walking = list(range(len(jobs)))
     while walking:
-        ends = [min(grids[k][0].size, at[k] + size[k]) for k in walking]
-        oks = good(walking, [grids[k][1][at[k]:j] for k, j in zip(walking, ends)])
+        for k in walking:
+            grids[k].upto(at[k] + size[k])
+        ends = [min(grids[k].s.size, at[k] + size[k]) for k in walking]
+        oks = good(walking, [grids[k].p[at[k]:j] for k, j in zip(walking, ends)])
         still = []
         for k, j, ok in zip(walking, ends, oks):
             if not ok.all():
                 first_bad[k] = at[k] + int(np.argmin(ok))
                 continue
             at[k], size[k] = j, 2 * size[k]
-            if at[k] < grids[k][0].size:
+            if grids[k].more(at[k]):
                 still.append(k)
         walking = still
 
@@ -419,7 +427,7 @@ def sweep_many(
         if fb == 0:
             end[k] = SweepEnd.BLOCKED
             continue
-        p_bad = grids[k][1][fb]
+        p_bad = grids[k].p[fb]
         if not np.all(np.isfinite(p_bad)):
             end[k] = SweepEnd.DEGENERATE
         elif any(not kept_contact_holds(world, c, p_bad[None])[0] for c in motions[k].kept):
@@ -428,14 +436,14 @@ def sweep_many(
             end[k] = SweepEnd.BLOCKED
     last = _last_true_many(
         lambda xs: good(refine, [motions[k].poses(x) for k, x in zip(refine, xs)]),
-        [float(grids[k][0][first_bad[k] - 1]) for k in refine],  # type: ignore[operator]
-        [float(grids[k][0][first_bad[k]]) for k in refine], refine_bits)  # type: ignore[index]
+        [float(grids[k].s[first_bad[k] - 1]) for k in refine],  # type: ignore[operator]
+        [float(grids[k].s[first_bad[k]]) for k in refine], refine_bits)  # type: ignore[index]
     last_of = dict(zip(refine, last))
     params: list[FloatArray] = []
     poses: list[FloatArray] = []
     for k in range(len(jobs)):
-        s, p = grids[k]
         fb = first_bad[k]
+        s, p = grids[k].whole() if fb is None else (grids[k].s, grids[k].p)
         if fb == 0:  # blocked at once: the state of the start
             params.append(np.zeros(0))
             poses.append(motions[k].start.as_array()[None])
@@ -452,26 +460,36 @@ def sweep_many(
                 poses.append(p[:fb])
 
     # The states along every sweep (one identification), and where they change.
-    offsets = np.concatenate([[0], np.cumsum([p.shape[0] for p in poses])])
-    keys, masks = _state_keys(world, np.concatenate(poses), tol)
+    offsets = np.concatenate([[0], np.cumsum([p.shape[0] for p in poses])]).astype(np.int64)
+    rows, masks = _state_rows(world, np.concatenate(poses), tol)
+    changed = np.zeros(rows.shape[0], dtype=bool)  # row i differs from row i - 1 of its sweep
+    changed[1:] = np.any(rows[1:] != rows[:-1], axis=1)
+    changed[offsets[:-1]] = False
+    states: dict[bytes, ContactState] = {}
+
+    def state(i: int) -> ContactState:
+        key = rows[i].tobytes()
+        if key not in states:
+            states[key] = masks.state(i)  # type: ignore[attr-defined]
+        return states[key]
+
     changes: list[tuple[int, int, int]] = []  # (sweep, first sample of the new state, first of the old)
     for k in range(len(jobs)):
         if first_bad[k] == 0:
             continue
-        o, n = int(offsets[k]), params[k].size
+        o = int(offsets[k])
         start_i = 0
-        for i in range(1, n):
-            if keys[o + i] != keys[o + start_i]:
-                changes.append((k, i, start_i))
-                start_i = i
+        for i in (np.flatnonzero(changed[o:o + params[k].size])).tolist():
+            changes.append((k, i, start_i))
+            start_i = i
 
     def same(xs: list[FloatArray]) -> list[NDArray[np.bool_]]:
         placed = [motions[k].poses(x) for (k, _, _), x in zip(changes, xs)]
-        got = _state_keys(world, np.concatenate(placed), tol)[0] if placed else []
+        got = _state_rows(world, np.concatenate(placed), tol)[0] if placed else rows[:0]
         out, at = [], 0
         for (k, _, start_i), p in zip(changes, placed):
-            key = keys[int(offsets[k]) + start_i]
-            out.append(np.array([g == key for g in got[at:at + p.shape[0]]]))
+            key = rows[int(offsets[k]) + start_i]
+            out.append(np.all(got[at:at + p.shape[0]] == key, axis=1))
             at += p.shape[0]
         return out
 
@@ -482,16 +500,16 @@ def sweep_many(
     for k in range(len(jobs)):
         o = int(offsets[k])
         if first_bad[k] == 0:
-            out.append(Sweep(motions[k], (SweepPiece(masks.state(o), 0.0, 0.0),), end[k]))  # type: ignore[attr-defined]
+            out.append(Sweep(motions[k], (SweepPiece(state(o), 0.0, 0.0),), end[k]))
             continue
         pieces: list[SweepPiece] = []
         s0, start_i = 0.0, 0
         while c < len(changes) and changes[c][0] == k:
             _, i, _ = changes[c]
-            pieces.append(SweepPiece(masks.state(o + start_i), s0, bounds[c]))  # type: ignore[attr-defined]
+            pieces.append(SweepPiece(state(o + start_i), s0, bounds[c]))
             s0, start_i = bounds[c], i
             c += 1
-        pieces.append(SweepPiece(masks.state(o + start_i), s0, float(params[k][-1])))  # type: ignore[attr-defined]
+        pieces.append(SweepPiece(state(o + start_i), s0, float(params[k][-1])))
         out.append(Sweep(motions[k], tuple(pieces), end[k]))
     return out
 
@@ -520,14 +538,6 @@ def _placed_vertices(world: World, poses: FloatArray) -> tuple[FloatArray, Float
     return wx, wy
 
 
-def _pair_steps(world: World, a: FloatArray, b: FloatArray) -> FloatArray:
-    """(k,) the largest object-vertex displacement from pose ``a[i]`` to ``b[i]``: the
-    numbers :func:`_vertex_steps` gives for ``a[i], b[i]`` as consecutive poses."""
-    ax, ay = _placed_vertices(world, a)
-    bx, by = _placed_vertices(world, b)
-    return np.max(np.hypot(bx - ax, by - ay), axis=1)
-
-
 def _grid(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> FloatArray:
     """Parameter values from ``s0`` to ``s1`` (both included) such that no object vertex
     moves more than ``step_mm`` between consecutive values, up to the first undefined
@@ -541,52 +551,109 @@ def _grid(world: World, motion: Motion, s0: float, s1: float, step_mm: float) ->
 
 
 def _grid_poses(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> tuple[FloatArray, FloatArray]:
-    """:func:`_grid`'s parameter values and the motion's poses at them, (n,) and (n, 3).
+    """:func:`_grid`'s parameter values and the motion's poses at them, (n,) and (n, 3)."""
+    return _Grid(world, motion, s0, s1, step_mm).whole()
 
-    The rounds of halving, computed on the intervals still too long only: an interval
-    that moves no vertex too far is never halved again, and one with an undefined end
-    never is, nor is any interval after the first such (the grid is not refined past a
-    singularity). Each round places only its new midpoints; every number is computed
-    elementwise, so the grid and its poses are those of halving the whole grid round
-    after round.
+
+class _Grid:
+    """:func:`_grid`'s values and poses, computed as far as a sweep walks them.
+
+    The uniform grid is halved round after round: an interval that moves no vertex more
+    than the step is never halved again, nor one with an undefined end, nor any interval
+    after the first such (no refining past a singularity); the rounds stop when no
+    interval is halved, after 40 rounds, or once the grid holds MAX_GRID_SAMPLES. Only
+    the intervals still too long are halved, each new midpoint placed once, and every
+    number is computed elementwise: the values and poses are those of halving the whole
+    grid round after round.
+
+    A sweep that stops after a few samples needs only the first ones, while a grid near
+    a two-contact singularity holds thousands further on. :meth:`upto` halves only the
+    first m intervals of the uniform grid, which is exact when the whole grid's rounds
+    cannot have stopped earlier for its size: while the first part halves in round r,
+    the rest holds at most its count times 2^r samples (each round adds at most one per
+    interval), so below MAX_GRID_SAMPLES in all the whole grid is halved in that round
+    too. When that bound does not hold, the whole grid is computed.
     """
-    speed = max(motion.vertex_speed(world), EPS)
-    if motion.kind is MotionKind.TWO_CONTACT:
-        speed = min(speed, TWO_CONTACT_SPEED_CAP * world.object.polygon.radius)
-    n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))
-    s = np.linspace(s0, s1, n + 1)
-    p = motion.poses(s)
-    d = _vertex_steps(world, p)
-    undefined = np.flatnonzero(~np.isfinite(d))
-    first_undefined = float(s[undefined[0]]) if undefined.size else math.inf  # its start
-    k = np.flatnonzero(d > step_mm)
-    a, b, pa, pb = s[k], s[k + 1], p[k], p[k + 1]  # the intervals still too long
-    new_s: list[FloatArray] = [s]
-    new_p: list[FloatArray] = [p]
-    size = s.size
-    for _ in range(40):
-        before = a < first_undefined
-        if not np.any(before) or size >= MAX_GRID_SAMPLES:
-            break
-        a, b, pa, pb = a[before], b[before], pa[before], pb[before]
-        mids = 0.5 * (a + b)
-        pm = motion.poses(mids)
-        left, right = _pair_steps(world, pa, pm), _pair_steps(world, pm, pb)
-        new_s.append(mids)
-        new_p.append(pm)
-        size += mids.size
-        for starts, steps in ((a, left), (mids, right)):
-            bad = ~np.isfinite(steps)
-            if bad.any():
-                first_undefined = min(first_undefined, float(starts[bad].min()))
-        lf, rf = left > step_mm, right > step_mm
-        a, b = np.concatenate([a[lf], mids[rf]]), np.concatenate([mids[lf], b[rf]])
-        pa, pb = np.concatenate([pa[lf], pm[rf]]), np.concatenate([pm[lf], pb[rf]])
-    if len(new_s) == 1:
-        return s, p
-    s, p = np.concatenate(new_s), np.concatenate(new_p)
-    order = np.argsort(s, kind="stable")
-    return s[order], p[order]
+
+    def __init__(self, world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> None:
+        speed = max(motion.vertex_speed(world), EPS)
+        if motion.kind is MotionKind.TWO_CONTACT:
+            speed = min(speed, TWO_CONTACT_SPEED_CAP * world.object.polygon.radius)
+        self.n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))  # uniform intervals
+        self.world, self.motion, self.step = world, motion, step_mm
+        self.s0 = np.linspace(s0, s1, self.n + 1)
+        self.p0 = motion.poses(self.s0)
+        self.wx, self.wy = _placed_vertices(world, self.p0)
+        self.d0 = np.max(np.hypot(np.diff(self.wx, axis=0), np.diff(self.wy, axis=0)), axis=1)  # _vertex_steps
+        self.m = 0  # uniform intervals halved so far
+        self.s, self.p = self.s0[:1], self.p0[:1]
+
+    @property
+    def complete(self) -> bool:
+        return self.m == self.n
+
+    def upto(self, count: int) -> None:
+        """Make at least ``count`` values known (all of them when the grid has fewer)."""
+        while not self.complete and self.s.size < count:
+            m = max(count - 1, 2 * self.m, 1)
+            got = self._halved(m) if m < self.n else None
+            if got is None:
+                m, got = self.n, self._halved(self.n)
+            self.m, (self.s, self.p) = m, got  # type: ignore[misc]
+
+    def more(self, at: int) -> bool:
+        """Whether the grid holds a value at index ``at``, or may (not all computed)."""
+        return not self.complete or at < self.s.size
+
+    def whole(self) -> tuple[FloatArray, FloatArray]:
+        """All the values and their poses."""
+        if not self.complete:
+            self.m, (self.s, self.p) = self.n, self._halved(self.n)  # type: ignore[misc]
+        return self.s, self.p
+
+    def _halved(self, m: int) -> tuple[FloatArray, FloatArray] | None:
+        """The first ``m`` uniform intervals halved as in the whole grid, with their
+        poses; ``None`` when that cannot be told without the rest."""
+        outside = self.n - m  # samples after them
+        s, p, wx, wy, d = self.s0[:m + 1], self.p0[:m + 1], self.wx[:m + 1], self.wy[:m + 1], self.d0[:m]
+        undefined = np.flatnonzero(~np.isfinite(d))
+        first_undefined = float(s[undefined[0]]) if undefined.size else math.inf  # its start
+        k = np.flatnonzero(d > self.step)
+        # the intervals still too long: their ends and the object's vertices there
+        a, b = s[k], s[k + 1]
+        ax, ay, bx, by = wx[k], wy[k], wx[k + 1], wy[k + 1]
+        new_s: list[FloatArray] = [s]
+        new_p: list[FloatArray] = [p]
+        size = s.size
+        for r in range(40):
+            before = a < first_undefined
+            if not np.any(before) or size >= MAX_GRID_SAMPLES:
+                break
+            if outside and size + outside * 2 ** r >= MAX_GRID_SAMPLES:
+                return None  # the whole grid may have stopped growing by now
+            if not before.all():
+                a, b, ax, ay, bx, by = (v[before] for v in (a, b, ax, ay, bx, by))
+            mids = 0.5 * (a + b)
+            pm = self.motion.poses(mids)
+            mx, my = _placed_vertices(self.world, pm)
+            left = np.max(np.hypot(mx - ax, my - ay), axis=1)  # as _vertex_steps of (a, mid), (mid, b)
+            right = np.max(np.hypot(bx - mx, by - my), axis=1)
+            new_s.append(mids)
+            new_p.append(pm)
+            size += mids.size
+            for starts, steps in ((a, left), (mids, right)):
+                bad = ~np.isfinite(steps)
+                if bad.any():
+                    first_undefined = min(first_undefined, float(starts[bad].min()))
+            lf, rf = left > self.step, right > self.step
+            a, b = np.concatenate([a[lf], mids[rf]]), np.concatenate([mids[lf], b[rf]])
+            ax, ay = np.concatenate([ax[lf], mx[rf]]), np.concatenate([ay[lf], my[rf]])
+            bx, by = np.concatenate([mx[lf], bx[rf]]), np.concatenate([my[lf], by[rf]])
+        if len(new_s) == 1:
+            return s, p
+        s, p = np.concatenate(new_s), np.concatenate(new_p)
+        order = np.argsort(s, kind="stable")
+        return s[order], p[order]
 
 
 def dense_parameters(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> FloatArray:

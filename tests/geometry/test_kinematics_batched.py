@@ -236,3 +236,23 @@ def test_sweep_many_is_the_old_sweep_of_each(slot: World, step_mm: float, refine
     assert any(len(sw.pieces) > 2 for sw in many)
     assert sweep_many(slot, []) == []
 
+
+
+@pytest.mark.parametrize("step_mm", [3.0, 1.0, 0.01])
+def test_a_grid_computed_in_part_starts_as_the_whole_grid(slot: World, step_mm: float) -> None:
+    """_Grid.upto halves only the first intervals: what it knows is the start of the
+    whole grid (up to a singularity and at the sample cap too), with the same poses."""
+    motions = _motions(slot) + [(_through_a_singularity(1), 2 * math.pi), (_through_a_singularity(-1), 2 * math.pi)]
+    parts = 0
+    for motion, s_max in motions:
+        whole = _old_grid(slot, motion, 0.0, s_max, step_mm)
+        for count in (1, 64, 192, 448, 960):
+            g = K._Grid(slot, motion, 0.0, s_max, step_mm)
+            g.upto(count)
+            assert g.s.size >= min(count, whole.size) and g.more(g.s.size) != g.complete
+            assert np.array_equal(g.s, whole[:g.s.size])
+            assert np.array_equal(g.p, motion.poses(g.s), equal_nan=True)
+            parts += not g.complete
+            s, p = g.whole()
+            assert g.complete and np.array_equal(s, whole) and not g.more(s.size)
+    assert parts  # some grids were known in part only
