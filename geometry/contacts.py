@@ -917,21 +917,26 @@ def enumerate_contact_states(
     budget = 512
     by_group = np.lexsort((poses[:, 2], inverse))  # group, then theta
     bounds = np.searchsorted(inverse[by_group], np.arange(keys.shape[0] + 1))
+    # First an even subsample over theta of each group (one overlap test for all of
+    # them), then the rest of a group in chunks until one is valid.
+    orders = [by_group[bounds[g]:bounds[g + 1]] for g in range(keys.shape[0])]
+    firsts = [np.arange(0, order.size, max(1, order.size // budget)) for order in orders]
+    first_sel = [order[first] for order, first in zip(orders, firsts)]
+    first_free = ~object_env_overlap(world, poses[np.concatenate(first_sel)], penetration_tol) \
+        if first_sel else np.zeros(0, dtype=bool)
+    first_at = np.concatenate([[0], np.cumsum([sel.size for sel in first_sel])])
     for g in range(keys.shape[0]):
-        order = by_group[bounds[g]:bounds[g + 1]]
-        witnesses: IntArray = np.zeros(0, dtype=np.int64)
-        # First an even subsample over theta, then the rest in chunks until one is valid.
-        first = np.arange(0, order.size, max(1, order.size // budget))
-        is_first = np.zeros(order.size, dtype=bool)
-        is_first[first] = True
-        rest = np.flatnonzero(~is_first)
-        batches = [first] + [rest[k:k + 4 * budget] for k in range(0, rest.size, 4 * budget)]
-        for bidx in batches:
-            sel = order[bidx]
-            free = ~object_env_overlap(world, poses[sel], penetration_tol)
-            witnesses = np.concatenate([witnesses, sel[free]])
-            if witnesses.size:
-                break
+        order, first = orders[g], firsts[g]
+        witnesses: IntArray = first_sel[g][first_free[first_at[g]:first_at[g + 1]]]
+        if not witnesses.size:
+            is_first = np.zeros(order.size, dtype=bool)
+            is_first[first] = True
+            rest = np.flatnonzero(~is_first)
+            for k in range(0, rest.size, 4 * budget):
+                sel = order[rest[k:k + 4 * budget]]
+                witnesses = sel[~object_env_overlap(world, poses[sel], penetration_tol)]
+                if witnesses.size:
+                    break
         if witnesses.size == 0:
             continue
         # Distinct poses only (a zero-dimensional state has a single pose).

@@ -23,7 +23,7 @@ from geometry.contacts import StateWitness, Workspace, contact_state, enumerate_
 from geometry.features import FREE, ContactState
 from geometry.grasps import GraspSet
 from geometry.kinematics import SweepEnd, sweep, translate
-from geometry.poses import Pose
+from geometry.poses import Pose, transform_points
 from geometry.tolerances import CONTACT_BACKOFF, CONTACT_TOL
 from geometry.world import World
 from ldhp_tamp.primitives.registry import DomainInfo, PrimitiveRegistry
@@ -176,6 +176,16 @@ def _vertex_on_vertex(world: World, pose: Pose, tol: float = CONTACT_TOL) -> boo
     return bool(np.any(d <= tol))
 
 
+def _vertices_on_vertices(world: World, poses: list[Pose], tol: float = CONTACT_TOL) -> np.ndarray:
+    """:func:`_vertex_on_vertex` at each of the poses, (n,) bool, in one computation."""
+    env = world.environment
+    if not poses:
+        return np.zeros(0, dtype=bool)
+    v = transform_points(np.array([p.as_array() for p in poses]), world.object.polygon.vertices)  # (n, N, 2)
+    d = np.linalg.norm(v[:, :, None, :] - env.vertices[None, None, env.vertex_convex, :], axis=3)
+    return np.any(d <= tol, axis=(1, 2))
+
+
 def proper_states(world: World, witnesses: tuple[StateWitness, ...]) -> tuple[StateWitness, ...]:
     """Drop the states every witness of which rests an object vertex exactly on a convex
     environment vertex (e.g. a corner balanced on the slot's lip corner): a measure-zero
@@ -183,9 +193,11 @@ def proper_states(world: World, witnesses: tuple[StateWitness, ...]) -> tuple[St
     object vertex in a concave corner (the slot's floor meeting its wall) is kept: that
     is where a biplanar slide along the floor and the wall starts or ends, and the corner
     holds it robustly. The witnesses that do so are dropped from the states kept, too."""
+    poses = [p for w in witnesses for p in w.witnesses]
+    on_vertex = iter(_vertices_on_vertices(world, poses).tolist())
     out = []
     for w in witnesses:
-        keep = tuple(p for p in w.witnesses if not _vertex_on_vertex(world, p))
+        keep = tuple(p for p in w.witnesses if not next(on_vertex))
         if keep:
             out.append(StateWitness(w.state, keep))
     return tuple(out)

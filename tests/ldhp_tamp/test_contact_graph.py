@@ -110,6 +110,22 @@ def test_vertex_on_convex_vertex_states_are_dropped(task2) -> None:
             assert np.min(np.linalg.norm(v[:, None] - convex[None], axis=2)) > 0.1
 
 
+def test_vertices_on_vertices_is_the_one_pose_test_at_each(task2) -> None:
+    """contact_graph._vertices_on_vertices (all witnesses at once) against the one-pose
+    _vertex_on_vertex, on task 2's enumerated witnesses and poses nudged from them."""
+    from geometry.contacts import enumerate_contact_states
+    from ldhp_tamp.contact_graph import _vertex_on_vertex, _vertices_on_vertices
+
+    sc, ctx = task2
+    poses = [p for w in enumerate_contact_states(sc.world, ctx.workspace, max_contacts=3) for p in w.witnesses]
+    rng = np.random.default_rng(0)
+    poses += [Pose(p.x + 0.05 * rng.normal(), p.y + 0.05 * rng.normal(), p.theta) for p in poses]
+    got = _vertices_on_vertices(sc.world, poses)
+    assert got.tolist() == [_vertex_on_vertex(sc.world, p) for p in poses]
+    assert got.any() and not got.all()
+    assert _vertices_on_vertices(sc.world, []).shape == (0,)
+
+
 def test_states_in_a_concave_corner_are_kept(task2, domain) -> None:
     """The block lying in the slot's corner (l4 on the floor, l3 flush with the left
     wall, v4 in the corner) ends the paper's biplanar slide along floor and wall."""
