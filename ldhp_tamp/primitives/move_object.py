@@ -50,9 +50,13 @@ MARGIN_MM = 2.0
 #: coarser than a stream's, since only the order of the states met matters there.
 TRANSITION_STEP_MM = 3.0
 #: Sweeps walked side by side (:func:`geometry.kinematics.sweep_many`) when finding the
-#: admissible transitions, and how many such batches make a forked process worth it.
+#: admissible transitions, about; and how many batches make a forked process worth it.
+#: A forked child costs about 0.1 s of CPU time here (its copies of the pages the
+#: parent's objects share), and on a loaded machine it waits for a core: task 2's 484
+#: sweeps (0.7 s of CPU in batches) took 0.7-1.1 s in one process and 1.4-2.0 s forked
+#: at load 3 on 2 cores.
 TRANSITION_BATCH = 64
-TRANSITION_BATCHES_PER_CORE = 2
+TRANSITION_BATCHES_PER_CORE = 4
 
 #: Largest orientation error (mm of vertex motion at the object's radius) an air-move
 #: leaves at its end: the in-state alignment's tolerance, far below the plan spec's 1 mm.
@@ -187,9 +191,12 @@ class _Swept:
                     found.add((a, b))
             return found
 
-        batches = [motions[k:k + TRANSITION_BATCH] for k in range(0, len(motions), TRANSITION_BATCH)]
+        # Batches of about TRANSITION_BATCH sweeps (every n-th job in each: neighbours, of
+        # one state, tend to cost alike), on the cores when each gets several.
+        n = max(1, math.ceil(len(motions) / TRANSITION_BATCH))
         pairs: set[tuple[ContactState, ContactState]] = set()
-        for found in fork_map(pairs_from, batches, min_items_per_core=TRANSITION_BATCHES_PER_CORE):
+        for found in fork_map(pairs_from, [motions[i::n] for i in range(n)],
+                              min_items_per_core=TRANSITION_BATCHES_PER_CORE):
             pairs |= found
         return pairs
 
