@@ -244,15 +244,9 @@ def _default_overlap(world: World, poses: FloatArray) -> NDArray[np.bool_]:
     return object_env_overlap(world, poses, tol=SWEEP_TOL)
 
 
-def _state_keys(world: World, poses: FloatArray, tol: float) -> tuple[list[bytes], object]:
-    """A hashable key per pose (packed principal-contact masks) and the masks."""
-    packed, m = _state_rows(world, poses, tol)
-    return [row.tobytes() for row in packed], m
-
-
 def _state_rows(world: World, poses: FloatArray, tol: float) -> tuple[NDArray[np.uint8], object]:
-    """The packed principal-contact masks of each pose, (n, bytes): equal rows, equal
-    states (the rows of :func:`_state_keys`), and the masks."""
+    """The packed principal-contact masks of each pose, (n, bytes), and the masks: equal
+    rows, equal states."""
     from geometry.contacts import principal_contact_masks
 
     m = principal_contact_masks(world, poses, tol)
@@ -522,13 +516,6 @@ TWO_CONTACT_SPEED_CAP = 8.0
 MAX_GRID_SAMPLES = 20_000
 
 
-def _vertex_steps(world: World, poses: FloatArray) -> FloatArray:
-    """(n - 1,) the largest object-vertex displacement between consecutive poses (NaN
-    where a pose is undefined)."""
-    wx, wy = _placed_vertices(world, poses)
-    return np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)
-
-
 def _placed_vertices(world: World, poses: FloatArray) -> tuple[FloatArray, FloatArray]:
     """The object's vertices at each pose: world x and y, (n, N) each."""
     verts = world.object.polygon.vertices
@@ -584,7 +571,7 @@ class _Grid:
         self.s0 = np.linspace(s0, s1, self.n + 1)
         self.p0 = motion.poses(self.s0)
         self.wx, self.wy = _placed_vertices(world, self.p0)
-        self.d0 = np.max(np.hypot(np.diff(self.wx, axis=0), np.diff(self.wy, axis=0)), axis=1)  # _vertex_steps
+        self.d0 = np.max(np.hypot(np.diff(self.wx, axis=0), np.diff(self.wy, axis=0)), axis=1)  # consecutive samples
         self.m = 0  # uniform intervals halved so far
         self.s, self.p = self.s0[:1], self.p0[:1]
 
@@ -636,7 +623,7 @@ class _Grid:
             mids = 0.5 * (a + b)
             pm = self.motion.poses(mids)
             mx, my = _placed_vertices(self.world, pm)
-            left = np.max(np.hypot(mx - ax, my - ay), axis=1)  # as _vertex_steps of (a, mid), (mid, b)
+            left = np.max(np.hypot(mx - ax, my - ay), axis=1)  # as consecutive samples
             right = np.max(np.hypot(bx - mx, by - my), axis=1)
             new_s.append(mids)
             new_p.append(pm)

@@ -34,6 +34,14 @@ def slot() -> World:
 # ---------------------------------------------------------------- the reference (old) code
 
 
+def _old_vertex_steps(world: World, poses: np.ndarray) -> np.ndarray:
+    verts = world.object.polygon.vertices
+    c, sn = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    wx = c[:, None] * verts[None, :, 0] - sn[:, None] * verts[None, :, 1] + poses[:, 0:1]
+    wy = sn[:, None] * verts[None, :, 0] + c[:, None] * verts[None, :, 1] + poses[:, 1:2]
+    return np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)
+
+
 def _old_grid(world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> np.ndarray:
     speed = max(motion.vertex_speed(world), EPS)
     if motion.kind is K.MotionKind.TWO_CONTACT:
@@ -41,7 +49,7 @@ def _old_grid(world: World, motion: Motion, s0: float, s1: float, step_mm: float
     n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))
     s = np.linspace(s0, s1, n + 1)
     for _ in range(40):
-        d = K._vertex_steps(world, motion.poses(s))
+        d = _old_vertex_steps(world, motion.poses(s))
         undefined = np.flatnonzero(~np.isfinite(d))
         stop = int(undefined[0]) if undefined.size else d.size
         too_far = np.zeros(d.size, dtype=bool)
