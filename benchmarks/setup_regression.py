@@ -19,7 +19,8 @@ computes them again and compares: states, names and ends exactly, numbers to ``-
 (default 1e-9; exact equality is reported separately). Exit status 1 on any difference.
 The reference of a change is recorded with the code before it, e.g. main's::
 
-    PYTHONPATH=/work/main .venv/bin/python benchmarks/setup_regression.py record /tmp/setup_ref.json.gz
+    mkdir /tmp/before && git archive main | tar -x -C /tmp/before
+    PYTHONPATH=/tmp/before .venv/bin/python benchmarks/setup_regression.py record /tmp/setup_ref.json.gz
     PYTHONPATH=. .venv/bin/python benchmarks/setup_regression.py check /tmp/setup_ref.json.gz
 
 The grasp set (which the air-move's lifts and placements ask for a carrier) is enumerated
