@@ -93,6 +93,10 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+#: mm: a pivot the judge refuses takes with it the pivots of the same finger, the same way
+#: round, on a contact at most this far from its own (GraspPlanner.reject_adjust).
+PIVOT_REFUSAL_RADIUS = 5.0
+
 
 
 class GraspPlanStatus(enum.Enum):
@@ -652,6 +656,20 @@ class GraspPlanner:
         if cands.valid[i] < 0:
             return False
         cands.valid[i] = -1
+        e = cands.edges
+        if e.primitive == "pivot":
+            # The judge refuses a turn of the gripper about finger k when the object may
+            # follow that finger instead of staying (its surface sticks) or move otherwise.
+            # Turning the same way about the same finger on nearly the same contact pushes
+            # the object alike: those go too (one refusal each would spend the judge's
+            # retries on near-copies of this one).
+            gs = self.grasps
+            k = int(e.finger[i])
+            here = gs.contact[e.src, k]
+            near = np.linalg.norm(np.nan_to_num(here - gs.contact[e.src[i], k], nan=np.inf), axis=1) <= PIVOT_REFUSAL_RADIUS
+            alike = (e.finger == k) & (np.sign(e.sense) == np.sign(e.sense[i])) & near
+            log.debug("the judge's refusal of pivot %d -> %d takes %d like it", e.src[i], e.dst[i], int(alike.sum()))
+            cands.valid[alike] = -1
         return True
 
     def _drop(self, key: tuple[str, bytes], out: BoolArray) -> int:

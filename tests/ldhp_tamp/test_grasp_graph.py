@@ -423,6 +423,30 @@ def test_an_adjust_grasp_edge_a_judge_refused_is_left_out_of_the_next_plan(pick:
     validate(pick, again.steps)
 
 
+def test_a_refused_pivot_takes_the_pivots_like_it_along(pick: Scenario, pick_grasps):
+    """The judge refusing a pivot (the object may follow the finger it turns about) marks
+    infeasible every pivot about the same finger, turning the same way, on a contact within
+    PIVOT_REFUSAL_RADIUS of its own; the other sense and farther contacts stay unknown."""
+    from types import SimpleNamespace
+
+    from ldhp_tamp.grasp_graph import PIVOT_REFUSAL_RADIUS, _Cands
+    from ldhp_tamp.primitives.adjust_grasp import Pivot
+
+    planner = GraspPlanner(pick.world, pick_grasps, bindings())
+    every = np.ones(len(pick_grasps), dtype=bool)
+    edges = Pivot().propose(planner.context, pick.start, np.arange(1, len(pick_grasps)), every)
+    n = len(edges)
+    cands = _Cands(edges, np.zeros(len(pick_grasps) + 1, dtype=np.int64), np.zeros(n), np.zeros(n, dtype=np.int8))
+    i = 0
+    k = int(edges.finger[i])
+    assert planner.reject_adjust(SimpleNamespace(adjust_edges=[(cands, i)]), 0)
+    dist = np.linalg.norm(np.nan_to_num(pick_grasps.contact[edges.src, k] - pick_grasps.contact[edges.src[i], k],
+                                        nan=np.inf), axis=1)
+    alike = (edges.finger == k) & (np.sign(edges.sense) == np.sign(edges.sense[i])) & (dist <= PIVOT_REFUSAL_RADIUS)
+    assert alike.sum() > 1 and (cands.valid[alike] == -1).all()
+    assert (~alike).any() and (cands.valid[~alike] == 0).all()
+
+
 def test_a_search_out_of_edge_checks_says_so_and_blames_where_it_spent_them(pick: Scenario, pick_grasps):
     # The pick's lift with every approach refused when checked and a budget of a few edge
     # checks: the search spends them on approaches at T_0 and stops undecided. Counting the
