@@ -648,7 +648,9 @@ class GraspPlanner:
         problem, the physics simulation) found that its motion does not execute. Returns
         whether it was marked (False for a MoveObject step or an edge already known
         infeasible); the next :meth:`plan` of the path avoids it (the layer's candidate
-        edges, with what is known of them, are cached per pose)."""
+        edges, with what is known of them, are cached per pose). A refused ``pivot``
+        marks the pivots like it too: the same finger, the same way round, a contact
+        within :data:`PIVOT_REFUSAL_RADIUS`."""
         taken = result.adjust_edges[step] if 0 <= step < len(result.adjust_edges) else None
         if taken is None:
             return False
@@ -666,7 +668,8 @@ class GraspPlanner:
             gs = self.grasps
             k = int(e.finger[i])
             here = gs.contact[e.src, k]
-            near = np.linalg.norm(np.nan_to_num(here - gs.contact[e.src[i], k], nan=np.inf), axis=1) <= PIVOT_REFUSAL_RADIUS
+            off = np.nan_to_num(here - gs.contact[e.src[i], k], nan=np.inf)
+            near = np.linalg.norm(off, axis=1) <= PIVOT_REFUSAL_RADIUS
             alike = (e.finger == k) & (np.sign(e.sense) == np.sign(e.sense[i])) & near
             log.debug("the judge's refusal of pivot %d -> %d takes %d like it", e.src[i], e.dst[i], int(alike.sum()))
             cands.valid[alike] = -1
