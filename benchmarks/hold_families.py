@@ -2,9 +2,9 @@
 
 The statics behind ``docs/design.md`` ("Results on the paper's tasks", task 1 at 60
 degrees): with the gripper's two round fingers at a fixed spacing ``s`` (centre to
-centre; the range's maximum for a gripper that opens), finger 1's centre walks the
-object's offset curve (distance ``r``, the finger radius: every placement that touches,
-the corners included), finger 2's centre is every point of that curve at distance ``s``.
+centre; the range's maximum for a gripper that opens), the placements are the pinches of
+:func:`geometry.grasps.enumerate_grasps` (finger 1 on every contact sample, the corners'
+normals included; finger 2 wherever a centre ``s`` away touches the object).
 For each placement the two contact forces (normal + tangential, the normal along the
 line from the finger's centre to its contact) and the weight at the centre of mass give
 three equations in four unknowns; along the one free internal force the script finds
@@ -31,23 +31,15 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
-import shapely
+from dataclasses import replace
 
+import numpy as np
+
+from geometry.grasps import GraspOptions, enumerate_grasps
+from geometry.poses import Pose
 from geometry.world import TwoPointGripper
 from ldhp_tamp.errors import LdhpError
 from ldhp_tamp.scenario import feature_names, load_scenario
-
-def _feature(poly: np.ndarray, point: np.ndarray, tol: float = 1e-6) -> tuple[str, int]:
-    """('v', j) if ``point`` is vertex j, else ('l', i) for the nearest edge i."""
-    d_v = np.linalg.norm(poly - point, axis=1)
-    if d_v.min() <= tol:
-        return "v", int(np.argmin(d_v))
-    a, b = poly, np.roll(poly, -1, axis=0)
-    ab = b - a
-    t = np.clip(np.sum((point - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
-    return "l", int(np.argmin(np.linalg.norm(a + t[:, None] * ab - point, axis=1)))
-
 
 def _interval(rows: list[tuple[float, float]]) -> tuple[float, float]:
     """The set of t with a + b t <= 0 for every (a, b), as (lo, hi) (empty if lo > hi)."""
@@ -112,52 +104,40 @@ def least_mu(q: np.ndarray, n: np.ndarray, com: np.ndarray, weight: float, max_f
     return hi_mu, float(x[0]), float(x[2])
 
 
-def families(path: Path, theta_deg: float | None, samples: int) -> list[str]:
+def families(path: Path, theta_deg: float | None, samples: int, corner_normals: int = 60) -> list[str]:
+    """The table's lines: the families of holds at the scenario's goal pose (or the goal
+    turned to ``theta_deg``), over the pinches :func:`geometry.grasps.enumerate_grasps`
+    gives at the gripper's widest spacing (``samples`` contact samples per edge,
+    ``corner_normals`` per convex corner)."""
     scenario = load_scenario(path)
     world = scenario.world
     grip = world.gripper
     if not isinstance(grip, TwoPointGripper):
         raise LdhpError(f"{path}: the hold families are for the two-point gripper model")
-    pose = scenario.goal.as_array().copy()
-    if theta_deg is not None:
-        pose[2] = np.radians(theta_deg)
-    c, s_ = np.cos(pose[2]), np.sin(pose[2])
-    rot = np.array([[c, -s_], [s_, c]])
-    obj = world.object.polygon.vertices
-    poly = obj @ rot.T  # world frame, about the object's origin (a translation changes nothing)
-    com = world.object.com @ rot.T
+    spacing = float(max(grip.spacing))
+    rigid = replace(world, gripper=replace(grip, spacing=(spacing, spacing)))
+    gs = enumerate_grasps(rigid, GraspOptions(samples_per_edge=samples, vertex_fan=corner_normals, orientations=0))
+    pinches = np.flatnonzero(gs.n_touching == 2)
+    theta = scenario.goal.theta if theta_deg is None else np.radians(theta_deg)
+    turn = Pose(0.0, 0.0, float(theta))  # a translation changes nothing
+    com = turn.apply(world.object.com)
     weight = world.object.weight
     mu_g = float(world.friction.gripper)
     max_force = float(grip.max_force) if grip.max_force is not None else 1e6
-    radius, spacing = float(grip.finger_radius), float(max(grip.spacing))
-    shape = shapely.Polygon(poly)
-    curve = shape.buffer(radius, quad_segs=256).exterior
-    pts = np.array(shapely.get_coordinates(shapely.line_interpolate_point(
-        curve, np.linspace(0.0, 1.0, samples, endpoint=False), normalized=True)))
-    boundary = shape.exterior
     names = feature_names(scenario)
+    n = gs.n_object
 
-    def contact(centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        q = np.array(shapely.get_coordinates(boundary.interpolate(boundary.project(shapely.Point(centre))))[0])
-        return q, (q - centre) / np.linalg.norm(q - centre)
+    def name(f: int) -> str:
+        return names.object_edges[f] if f < n else names.object_vertices[f - n]
 
-    fams: dict[tuple[str, str], list[tuple[float, np.ndarray, np.ndarray, float, float]]] = defaultdict(list)
-    for i in range(samples):
-        d = np.linalg.norm(pts - pts[i], axis=1) - spacing
-        for j in np.flatnonzero(np.sign(d[:-1]) * np.sign(d[1:]) < 0):
-            w = d[j] / (d[j] - d[j + 1])
-            centres = np.stack([pts[i], pts[j] + w * (pts[j + 1] - pts[j])])
-            qn = [contact(cc) for cc in centres]
-            q, n = np.stack([x[0] for x in qn]), np.stack([x[1] for x in qn])
-            mu, f1, f2 = least_mu(q, n, com, weight, max_force)
-            if mu > mu_g:
-                continue
-            feats = [_feature(poly, qq) for qq in q]
-            key = tuple((names.object_vertices[k] if kind == "v" else names.object_edges[k]) for kind, k in feats)
-            fams[key].append((mu, q[0] @ rot, q[1] @ rot, f1, f2))  # contacts back in the object frame
-    out = [f"{scenario.name}: object at theta = {np.degrees(pose[2]):.1f} degrees in the air; fingers r = {radius:g} mm, "
-           f"{spacing:g} mm apart; weight {weight:.3f} N; mu_g = {mu_g:g}; at most {max_force:g} N per finger; "
-           f"{samples} placements of finger 1",
+    fams: dict[tuple[str, str], list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
+    for g in pinches:
+        mu, _, _ = least_mu(turn.apply(gs.contact[g]), turn.apply_vector(gs.normal[g]), com, weight, max_force)
+        if mu <= mu_g:
+            fams[(name(gs.feature[g, 0]), name(gs.feature[g, 1]))].append((mu, gs.contact[g, 0], gs.contact[g, 1]))
+    out = [f"{scenario.name}: object at theta = {np.degrees(theta):.1f} degrees in the air; fingers "
+           f"r = {float(grip.finger_radius):g} mm, {spacing:g} mm apart; weight {weight:.3f} N; mu_g = {mu_g:g}; at most "
+           f"{max_force:g} N per finger; {len(pinches)} placements ({samples} samples per edge, {corner_normals} per corner)",
            "| family (finger 1, finger 2) | placements | least mu | finger 1 contact (object frame) | finger 2 contact |",
            "| --- | ---: | ---: | --- | --- |"]
     for key in sorted(fams, key=lambda k: min(m[0] for m in fams[k])):
@@ -172,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenario", type=Path, help="scenario TOML (two-point gripper); the pose is its goal")
     ap.add_argument("--theta", type=float, default=None, help="the object's angle instead of the goal's (degrees)")
-    ap.add_argument("--samples", type=int, default=8000, help="placements of finger 1 on the offset curve")
+    ap.add_argument("--samples", type=int, default=1000, help="finger contact samples per object edge")
     args = ap.parse_args(argv)
     try:
         lines = families(args.scenario, args.theta, args.samples)
