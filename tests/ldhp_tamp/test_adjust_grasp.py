@@ -605,7 +605,7 @@ def test_a_round_finger_rolls_along_the_edge_it_touches(two_point: Case):
     assert np.allclose(np.einsum("ij,ij->i", n, smp.slide[i, k][slipping]), 0.0, atol=1e-9)
 
 
-def test_a_wedged_block_is_let_go_of_by_rolling_the_finger_under_it() -> None:
+def test_a_wedged_block_is_let_go_of_by_rolling_the_finger_under_it(wedged_inverse) -> None:
     """Task 1's inverse: the block on its corner v2, tilted 75 degrees, wedged between the
     zero-mobility gripper's fingers (finger 1 on the top corner, finger 2 under the long
     side). Finger 2 and the table hold it alone (mu >= 0.12 of 0.2), but turning the
@@ -613,21 +613,7 @@ def test_a_wedged_block_is_let_go_of_by_rolling_the_finger_under_it() -> None:
     that way, which the table's friction does not hold; turning the other way rolls
     finger 1 into the corner. Rolling finger 2 along the side, it sticks: the rolls are
     the only pivots that hold the block still."""
-    from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner
-    from ldhp_tamp.resources import scenarios_dir
-    from ldhp_tamp.scenario import load_scenario
-
-    sc = load_scenario(scenarios_dir() / "inv_place_release.toml")
-    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=100))
-    planner = GraspPlanner(sc.world, gs, [REGISTRY.binding("pivot")], sc.start_grasp, True,
-                           GraspGraphOptions(helper=False))
-    planner.prepare(sc.start.as_array())
-    ctx, start = planner.context, int(planner.start_index)
-    th = math.radians(-75.0)
-    pose = Pose(70.0 - 70.0 * math.cos(th), -70.0 * math.sin(th), th)  # v2 at (70, 0)
-    members = np.zeros(len(ctx.grasps), dtype=bool)
-    members[planner.pose_grasps(pose.as_array())] = True
-    feasible = ag.Pivot().intra_edges(ctx, pose, np.flatnonzero(members | (np.arange(len(members)) == start)))
+    feasible, start = wedged_inverse.pivots, wedged_inverse.start
     from_start = feasible.take(np.flatnonzero(feasible.src == start))
     assert len(from_start) and (np.abs(from_start.sense) == ag.ROLL_SENSE).all()
     assert (from_start.finger == 1).all()

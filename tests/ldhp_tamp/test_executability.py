@@ -16,18 +16,18 @@ from ldhp_tamp.scenario import load_scenario, load_scenario_string
 
 SPEC = Path(__file__).resolve().parents[1] / "data" / "spec"
 
-TALL_BLOCK = """
+BLOCK_ON_TABLE = """
 format = "ldhp-scenario/1"
-name = "tall-block"
+name = "{name}"
 [object]
-vertices = [[0, 0], [40, 0], [40, 100], [0, 100]]
+vertices = [[0, 0], [{w}, 0], [{w}, {h}], [0, {h}]]
 [[environment.solids]]
 name = "table"
 vertices = [[-300, -50], [300, -50], [300, 0], [-300, 0]]
 [gripper]
 model = "two-point"
 finger_radius = 5
-spacing = [20, 140]
+spacing = [{lo}, {hi}]
 [friction]
 environment = {mu_env}
 gripper = 0.8
@@ -59,7 +59,8 @@ def _tip_plan(height: float, turn_deg: float = 5.0, steps: int = 5) -> Plan:
                          # friction (0.43 W of push, floor friction within 0.9): it tips
 ])
 def test_a_one_finger_tip_is_refused_when_the_block_would_slide(mu_env: float, height: float, ambiguous: bool) -> None:
-    scenario = load_scenario_string(TALL_BLOCK.format(mu_env=mu_env), "tall-block")
+    text = BLOCK_ON_TABLE.format(name="tall-block", w=40, h=100, lo=20, hi=140, mu_env=mu_env)
+    scenario = load_scenario_string(text, "tall-block")
     report = forward_check(_tip_plan(height), scenario)
     assert report.checked > 0
     assert (not report.ok) is ambiguous
@@ -84,25 +85,9 @@ def test_a_tip_the_fingers_do_not_force_is_refused() -> None:
     assert "may stay where it is" in report.reason
 
 
-SQUARE_BLOCK = """
-format = "ldhp-scenario/1"
-name = "square-block"
-[object]
-vertices = [[0, 0], [80, 0], [80, 80], [0, 80]]
-[[environment.solids]]
-name = "table"
-vertices = [[-300, -50], [300, -50], [300, 0], [-300, 0]]
-[gripper]
-model = "two-point"
-finger_radius = 5
-spacing = [{lo}, {hi}]
-[friction]
-environment = 0.3
-gripper = 0.8
-[task]
-start = [0, 0, 0]
-goal = [0, 0, 0]
-"""
+def _square(lo: float, hi: float) -> str:
+    """An 80 mm square block on the table (mu_e 0.3, mu_g 0.8), the spacing [lo, hi]."""
+    return BLOCK_ON_TABLE.format(name="square-block", w=80, h=80, lo=lo, hi=hi, mu_env=0.3)
 
 
 def _corner_tip_plan(turn_deg: float = 5.0, steps: int = 5) -> tuple[Plan, float]:
@@ -129,36 +114,24 @@ def test_two_fingers_on_a_corner_of_a_gripper_that_closes_are_left_to_the_grip_f
     and the side one push the block along the table instead of tipping it (tipping about
     the far corner takes 0.53 W at height 75, sliding 0.3 W)."""
     plan, w = _corner_tip_plan()
-    closing = load_scenario_string(SQUARE_BLOCK.format(lo=10, hi=150), "square-block")
+    closing = load_scenario_string(_square(10, 150), "square-block")
     assert forward_check(plan, closing).ok
-    rigid = load_scenario_string(SQUARE_BLOCK.format(lo=w, hi=w), "square-block")
+    rigid = load_scenario_string(_square(w, w), "square-block")
     report = forward_check(plan, rigid)
     assert not report.ok and report.step == 0 and report.waypoint == 0, report.reason
 
 
-def test_a_finger_rolling_on_the_object_is_seen_rolling() -> None:
+def test_a_finger_rolling_on_the_object_is_seen_rolling(wedged_inverse) -> None:
     """A rolling pivot (task 1's inverse, the block on its corner at 75 degrees, finger 2
     rolling along the long side under it while finger 1 lets go): the object stays still.
     Between two waypoints the gripper's screw turns about a point half a step ahead of the
     contact, so the displacement to the next waypoint alone has the finger's surface leave
     the object by radius x turn^2 / 2, and the block following it balances too; the motion
     from the previous waypoint to the next is centred on the contact."""
-    from geometry.grasps import GraspOptions, enumerate_grasps
-    from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner
-    from ldhp_tamp.primitives import REGISTRY
     from ldhp_tamp.primitives import adjust_grasp as ag
-    from ldhp_tamp.resources import scenarios_dir
 
-    sc = load_scenario(scenarios_dir() / "inv_place_release.toml")
-    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=100))
-    planner = GraspPlanner(sc.world, gs, [REGISTRY.binding("pivot")], sc.start_grasp, True,
-                           GraspGraphOptions(helper=False))
-    planner.prepare(sc.start.as_array())
-    ctx, start = planner.context, int(planner.start_index)
-    th = math.radians(-75.0)
-    pose = Pose(70.0 - 70.0 * math.cos(th), -70.0 * math.sin(th), th)  # on its corner v2 = (70, 0)
-    rows = np.union1d(planner.pose_grasps(pose.as_array()), [start])
-    edges = ag.Pivot().intra_edges(ctx, pose, rows)
+    sc, ctx, start, pose = wedged_inverse.scenario, wedged_inverse.context, wedged_inverse.start, wedged_inverse.pose
+    edges = wedged_inverse.pivots
     rolls = np.flatnonzero((edges.src == start) & (np.abs(edges.sense) == ag.ROLL_SENSE))
     assert rolls.size
     i = int(rolls[0])
