@@ -1568,11 +1568,11 @@ class Pivot(_AdjustGrasp):
                                                 | (np.diff(ctx._q(gs.width[rows])) != 0))]) if rows.size else z
         reach = r * np.pi + ROLL_TOL  # the farthest a turn of at most half a circle rolls
         key_u = group * (10.0 * (gs.perimeter + reach)) + u  # groups far apart on one line
-        lo = np.searchsorted(key_u, key_u - reach, side="left")
-        hi = np.searchsorted(key_u, key_u + reach, side="right")
-        cnt = hi - lo
-        ia = np.repeat(np.arange(rows.size), cnt)
-        ib = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(int(cnt.sum()))
+        ia, ib = _roll_candidates(rows.size, group, u, wrap_angle(gs.gripper[rows, 2]), r,
+                                  10.0 * (gs.perimeter + 2.0 * reach + 2.0 * np.pi * r))
+        # the pairs within reach along the edge (all the rolls), in (source, target) order
+        near = (key_u[ib] >= key_u[ia] - reach) & (key_u[ib] <= key_u[ia] + reach)
+        ia, ib = ia[near], ib[near]
         a, b = rows[ia], rows[ib]
         delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
         resid = (u[ib] - u[ia]) - r * delta
@@ -1595,6 +1595,40 @@ class Pivot(_AdjustGrasp):
         out["angle"] = round(math.degrees(float(m.angle[0, 1])), 4)
         out["turn_width"] = round(float(m.width[0, 1]), 4)
         return out
+
+
+def _roll_candidates(n: int, group: IntArray, u: FloatArray, theta: FloatArray, r: float, spread: float
+                     ) -> tuple[IntArray, IntArray]:
+    """Pairs (i, j) of ``n`` contacts, sorted by i then j, that may be rolls: a superset
+    of the pairs in one group whose residual slide ``(u_j - u_i) - r wrap(theta_j -
+    theta_i)`` is within ``ROLL_TOL``.
+
+    With ``v = u - r theta`` (``theta`` in [-pi, pi)) that residual is ``v_j - v_i +
+    2 pi r m`` for m in {-1, 0, 1}, so j lies in one of three windows of half-width
+    ``ROLL_TOL`` (and a rounding margin) about ``v_i - 2 pi r m`` in the group's order by
+    v: a few contacts each, where the window of the reach along the edge (``r pi +
+    ROLL_TOL`` either way) holds dozens. ``spread`` keeps the groups apart on one line.
+    """
+    if n == 0:
+        z = np.zeros(0, np.int64)
+        return z, z
+    v = u - r * theta
+    order = np.lexsort((v, group))
+    key = group[order] * spread + v[order]
+    half = ROLL_TOL + 1e-6
+    parts_i, parts_j = [], []
+    for m in (-1, 0, 1):
+        centre = key - 2.0 * np.pi * r * m
+        lo = np.searchsorted(key, centre - half, side="left")
+        hi = np.searchsorted(key, centre + half, side="right")
+        cnt = hi - lo
+        i = np.repeat(np.arange(n), cnt)
+        j = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(int(cnt.sum()))
+        parts_i.append(order[i])
+        parts_j.append(order[j])
+    pair = np.sort(np.concatenate(parts_i) * n + np.concatenate(parts_j))
+    pair = pair[np.concatenate([[True], pair[1:] != pair[:-1]])]  # windows meet when r is tiny
+    return pair // n, pair % n
 
 
 #: ``IntraEdges.sense`` of a rolling pivot (times the sign of its turn).

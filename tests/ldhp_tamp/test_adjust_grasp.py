@@ -605,6 +605,26 @@ def test_a_round_finger_rolls_along_the_edge_it_touches(two_point: Case):
     assert np.allclose(np.einsum("ij,ij->i", n, smp.slide[i, k][slipping]), 0.0, atol=1e-9)
 
 
+def test_the_rolls_are_every_pair_that_rolls_found_by_brute_force(two_point: Case):
+    """``Pivot._rolls`` looks for targets in three narrow windows (v = u - r theta);
+    every pair of contacts on one edge at one width whose residual slide is within
+    ROLL_TOL must be there, in (source, target) order: compared with all pairs."""
+    ctx, gs = two_point.ctx, two_point.grasps
+    r = float(two_point.world.gripper.finger_radius)
+    for k in range(2):
+        a, b, delta, _, resid = ag.Pivot._rolls(ctx, k)
+        rows = np.flatnonzero(gs.touching[:, k] & (gs.feature[:, k] >= 0) & (gs.feature[:, k] < gs.n_object))
+        i, j = (x.reshape(-1) for x in np.meshgrid(rows, rows, indexing="ij"))
+        d = wrap_angle(gs.gripper[j, 2] - gs.gripper[i, 2])
+        res = gs.arclength[j, k] - gs.arclength[i, k] - r * d
+        same = (gs.feature[i, k] == gs.feature[j, k]) & (ctx._q(gs.width[i]) == ctx._q(gs.width[j]))
+        ok = same & (i != j) & (np.abs(d) > ag.ROLL_MIN_TURN) & (np.abs(res) <= ag.ROLL_TOL)
+        want = {(int(x), int(y)) for x, y in zip(i[ok], j[ok])}
+        got = list(zip(a.tolist(), b.tolist()))
+        assert len(got) == len(set(got)) and set(got) == want
+        np.testing.assert_allclose(resid, gs.arclength[b, k] - gs.arclength[a, k] - r * delta, atol=1e-9)
+
+
 def test_a_wedged_block_is_let_go_of_by_rolling_the_finger_under_it(wedged_inverse) -> None:
     """Task 1's inverse: the block on its corner v2, tilted 75 degrees, wedged between the
     zero-mobility gripper's fingers (finger 1 on the top corner, finger 2 under the long
