@@ -626,3 +626,23 @@ def test_a_solve_asks_the_engines_themselves_while_loading(monkeypatch: pytest.M
     with pytest.raises(EngineError, match="unknown planning engine 'pyperplan' .*; installed: fast-downward$"):
         symbolic.load_checked_domain("ldhp", "pyperplan", REGISTRY)
     assert symbolic.load_checked_domain("ldhp", "pyperplan", REGISTRY, load_engine=False).info.name == "ldhp"
+
+
+def test_a_domain_parses_without_packrat_and_puts_pyparsing_back() -> None:
+    """The reader runs with pyparsing's memoization off (it is slower on PDDL) and the
+    process-wide state is restored afterwards, packrat on or off as it was."""
+    from pyparsing import ParserElement
+
+    from ldhp_tamp import symbolic
+
+    seen = []
+    before = (ParserElement._parse, ParserElement._packratEnabled)
+    with symbolic._no_packrat():
+        seen.append(ParserElement._packratEnabled)
+    assert seen == [False] and (ParserElement._parse, ParserElement._packratEnabled) == before
+    ParserElement.enable_packrat()
+    try:
+        symbolic.load_domain("ldhp")
+        assert ParserElement._packratEnabled and ParserElement._parse == ParserElement._parseCache
+    finally:
+        ParserElement._parse, ParserElement._packratEnabled = before
