@@ -59,6 +59,7 @@ __all__ = ["MAX_CONTACTS", "ForwardCheck", "alternative_motions", "falling_accel
 MAX_CONTACTS = 6
 
 _FREE, _STICK, _SLIDE = 0, 1, 2
+_SPLUS, _SMINUS = 2, 3  # falling_accelerations: sliding either way
 
 #: An assignment fixes the twist when its equations' smallest singular value is at least
 #: this fraction of the largest (nearer singular: a mechanism, not enumerated).
@@ -325,6 +326,15 @@ def falling_accelerations(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, 
     it has) or SEPARATING (no force, no acceleration into the solid). Every assignment gives
     a square linear system; a consistent solution is one whose signs hold.
 
+    Solved by elimination: lengths in units of the radius of gyration make the dynamics
+    ``a = g + W f`` (``g = (0, -1, 0)``, ``W``'s columns the force directions' wrenches
+    ``(u, d x u)``), and the ``m`` kinematic rows ``K a = 0`` (``K``'s rows ``(e, d x e)``
+    for the constrained directions ``e``) leave ``(K W) f = -K g``, an ``m x m`` system
+    (``m`` = twice the sticking contacts plus the sliding ones), solved in closed form. Its
+    determinant is the whole system's (``det [[I, -W], [K, 0]] = det(K W)``), tested
+    against the largest entry of the whole system to the power of its size, ``3 + m``.
+    ``K W`` has rank at most 3: assignments with ``m > 3`` are singular and skipped.
+
     Parameters
     ----------
     points, normals : array_like, shape (B, C, 2)
@@ -361,103 +371,133 @@ def falling_accelerations(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, 
     p = np.asarray(points, dtype=float)
     n = np.asarray(normals, dtype=float)
     b, c = p.shape[:2]
+    if not gyration_sq > 0.0:
+        raise GeometryError(f"forward: gyration_sq must be positive, got {gyration_sq}")
     m = np.broadcast_to(np.asarray(mu, dtype=float), (b, c))
     live = np.broadcast_to(np.asarray(present, dtype=bool), (b, c))
     cm = np.broadcast_to(np.asarray(com, dtype=float).reshape(-1, 2), (b, 2))
     pp = np.broadcast_to(np.asarray(probe_points, dtype=float).reshape(-1, 2), (b, 2))
     pn = np.broadcast_to(np.asarray(probe_normals, dtype=float).reshape(-1, 2), (b, 2))
-    k2 = float(gyration_sq)
-    order = np.argsort(~live, axis=1, kind="stable")
-    tk = lambda a: np.take_along_axis(a, order[..., None] if a.ndim == 3 else order, axis=1)  # noqa: E731
-    p, n, m, live = tk(p), tk(n), tk(m), tk(live)
-    t = np.stack([-n[..., 1], n[..., 0]], axis=-1)
+    if (live[:, :-1] < live[:, 1:]).any():  # the contacts present first
+        order = np.argsort(~live, axis=1, kind="stable")
+        tk = lambda a: np.take_along_axis(a, order[..., None] if a.ndim == 3 else order, axis=1)  # noqa: E731
+        p, n, m, live = tk(p), tk(n), tk(m), tk(live)
     # lengths in units of the radius of gyration (alpha then in 1 / that unit): the
     # systems are dimensionless, so the determinant test below is scale-free (in mm, a
     # 70 x 150 block's k^2 = 2283 made a well-posed sticking pivot look singular)
-    unit = math.sqrt(k2) if k2 > 0.0 else 1.0
-    k2 = 1.0 if k2 > 0.0 else 0.0
+    unit = math.sqrt(float(gyration_sq))
     d = (p - cm[:, None, :]) / unit
+    dp = (pp - cm) / unit
     falls = np.zeros(b, dtype=bool)
     onto = np.zeros(b, dtype=bool)
     count = live.sum(axis=1)
-    FREE, STICK, SPLUS, SMINUS = 0, 1, 2, 3
     for kk in np.unique(count):
-        group = np.flatnonzero(count == kk)
-        for assign in itertools.product((FREE, STICK, SPLUS, SMINUS), repeat=int(kk)):
-            rows = group[~onto[group]]  # an instance found leaning on its probe is decided
-            if not rows.size:
-                break
-            a_ = np.asarray(assign, dtype=np.int8)
-            n_st, n_sl = int((a_ == STICK).sum()), int((a_ >= SPLUS).sum())
-            nu = 3 + 2 * n_st + n_sl
-            r = rows.size
-            M = np.zeros((r, nu, nu))
-            rhs = np.zeros((r, nu))
-            # dynamics rows: a_lin - sum F = (0, -1); k2 alpha - sum d x F = 0
-            M[:, 0, 0] = 1.0
-            M[:, 1, 1] = 1.0
-            M[:, 2, 2] = k2
-            rhs[:, 1] = -1.0
-            col, row = 3, 3
-            kin: list[tuple[int, int, str]] = []  # (contact, unknown column, kind)
-            for j, mode in enumerate(a_):
-                dj = d[rows, j]
-                nj, tj, mj = n[rows, j], t[rows, j], m[rows, j]
-                if mode == FREE:
-                    continue
-                if mode == STICK:
-                    dirs = [nj, tj]
-                else:
-                    sgn = 1.0 if mode == SPLUS else -1.0
-                    dirs = [nj - sgn * mj[:, None] * tj]
-                for dvec in dirs:
-                    M[:, 0, col] = -dvec[:, 0]
-                    M[:, 1, col] = -dvec[:, 1]
-                    M[:, 2, col] = -(dj[:, 0] * dvec[:, 1] - dj[:, 1] * dvec[:, 0])
-                    kin.append((j, col, "force"))
-                    col += 1
-                # kinematic rows: the point's acceleration a_lin + alpha J d
-                comps = [nj, tj] if mode == STICK else [nj]
-                for e in comps:
-                    M[:, row, 0] = e[:, 0]
-                    M[:, row, 1] = e[:, 1]
-                    M[:, row, 2] = -dj[:, 1] * e[:, 0] + dj[:, 0] * e[:, 1]
-                    row += 1
-            det_ok = np.abs(np.linalg.det(M)) > 1e-12 * np.maximum(np.abs(M).max(axis=(1, 2)) ** nu, 1e-300)
-            if not det_ok.any():
+        rows = np.flatnonzero(count == kk)
+        kk = int(kk)
+        # per contact (first index) and instance, components as contiguous arrays
+        dx, dy = (np.ascontiguousarray(d[rows, :kk, e].T) for e in (0, 1))
+        nx, ny = (np.ascontiguousarray(n[rows, :kk, e].T) for e in (0, 1))
+        mm = np.ascontiguousarray(m[rows, :kk].T)
+
+        # the rows (e, d x e) of K, normal and tangent (a point's acceleration along e is
+        # that row times a); the columns (u, d x u) of W: the normal and the tangent
+        # (sticking), the cone edges n -/+ mu t (sliding +/-); t = (-n_y, n_x)
+        def wrench(ux: FloatArray, uy: FloatArray) -> _Vec:
+            return ux, uy, dx * uy - dy * ux
+
+        k_n, k_t = wrench(nx, ny), wrench(-ny, nx)
+        w_edge = {_SPLUS: wrench(nx + mm * ny, ny - mm * nx), _SMINUS: wrench(nx - mm * ny, ny + mm * nx)}
+
+        def largest(v: _Vec) -> FloatArray:
+            return np.maximum(np.maximum(np.abs(v[0]), np.abs(v[1])), np.abs(v[2]))
+
+        big_kn = largest(k_n)  # (kk, r): the rows' and columns' largest entries
+        big_k = np.maximum(big_kn, largest(k_t))
+        big_w = {sense: largest(w) for sense, w in w_edge.items()}
+        dpx, dpy, pnx, pny = dp[rows, 0], dp[rows, 1], pn[rows, 0], pn[rows, 1]
+        for assign in itertools.product((_FREE, _STICK, _SPLUS, _SMINUS), repeat=kk):
+            mcount = sum(2 if mode == _STICK else 1 for mode in assign if mode != _FREE)
+            if mcount > 3:  # rank(K W) <= rank(K) <= 3: singular
                 continue
-            sol = np.full((r, nu), np.nan)
-            sol[det_ok] = np.linalg.solve(M[det_ok], rhs[det_ok][..., None])[..., 0]
-            ok = det_ok.copy()
-            acc = sol[:, :3]
-
-            def point_acc(j: int) -> FloatArray:
-                dj = d[rows, j]
-                return acc[:, :2] + acc[:, 2:3] * np.stack([-dj[:, 1], dj[:, 0]], axis=-1)
-
-            col = 3
-            for j, mode in enumerate(a_):
-                apj = point_acc(j)
-                an = (apj * n[rows, j]).sum(axis=1)
-                at = (apj * t[rows, j]).sum(axis=1)
-                if mode == FREE:
-                    ok &= an >= -tol
-                    continue
-                if mode == STICK:
-                    fn_, ft_ = sol[:, col], sol[:, col + 1]
-                    ok &= (fn_ >= -tol) & (np.abs(ft_) <= m[rows, j] * fn_ + tol)
+            todo = ~onto[rows]  # an instance found leaning on its probe is decided
+            if not todo.any():
+                break
+            K: list[_Vec] = []
+            W: list[_Vec] = []
+            big = np.ones(rows.size)  # the largest entry of the whole system
+            for j, mode in enumerate(assign):
+                if mode == _STICK:
+                    K += [_at(k_n, j), _at(k_t, j)]
+                    W += [_at(k_n, j), _at(k_t, j)]
+                    big = np.maximum(big, big_k[j])
+                elif mode != _FREE:
+                    K.append(_at(k_n, j))
+                    W.append(_at(w_edge[mode], j))
+                    big = np.maximum(big, np.maximum(big_kn[j], big_w[mode][j]))
+            f, det = _solve_small(K, W, rows.size)
+            ok = todo & (np.abs(det) > 1e-12 * np.maximum(big ** (3 + mcount), 1e-300))
+            ax, ay, al = np.zeros(rows.size), np.full(rows.size, -1.0), np.zeros(rows.size)
+            for fc, w in zip(f, W):
+                ax = ax + fc * w[0]
+                ay = ay + fc * w[1]
+                al = al + fc * w[2]
+            acc = (ax, ay, al)
+            col = 0
+            for j, mode in enumerate(assign):
+                if mode == _FREE:
+                    ok &= _dot(acc, _at(k_n, j)) >= -tol
+                elif mode == _STICK:
+                    fn_, ft_ = f[col], f[col + 1]
+                    ok &= (fn_ >= -tol) & (np.abs(ft_) <= mm[j] * fn_ + tol)
                     col += 2
                 else:
-                    sgn = 1.0 if mode == SPLUS else -1.0
-                    ok &= (sol[:, col] >= -tol) & (sgn * at > tol)
+                    sgn = 1.0 if mode == _SPLUS else -1.0
+                    ok &= (f[col] >= -tol) & (sgn * _dot(acc, _at(k_t, j)) > tol)
                     col += 1
-            moving = np.abs(acc).max(axis=1) > tol
-            good = ok & moving
+            good = ok & (np.maximum(np.maximum(np.abs(ax), np.abs(ay)), np.abs(al)) > tol)
             if not good.any():
                 continue
-            g = rows[good]
-            falls[g] = True
-            dp = (pp[g] - cm[g]) / unit
-            ap = acc[good, :2] + acc[good, 2:3] * np.stack([-dp[:, 1], dp[:, 0]], axis=-1)
-            onto[g] |= (ap * pn[g]).sum(axis=1) < -tol
+            falls[rows[good]] = True
+            # the probe's material point: a_lin + alpha J dp
+            into = (ax - al * dpy) * pnx + (ay + al * dpx) * pny
+            onto[rows[good & (into < -tol)]] = True
     return falls, onto
+
+
+#: A 3-vector per instance, as its three components.
+_Vec = tuple[FloatArray, FloatArray, FloatArray]
+
+
+def _at(v: _Vec, j: int) -> _Vec:
+    return v[0][j], v[1][j], v[2][j]
+
+
+def _dot(u: _Vec, v: _Vec) -> FloatArray:
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+def _solve_small(K: list[_Vec], W: list[_Vec], r: int) -> tuple[list[FloatArray], FloatArray]:
+    """Per instance (``r`` of them), ``f`` solving ``(K W) f = -K g`` (``g = (0, -1, 0)``)
+    and ``det(K W)``, in closed form, for ``m = len(K) = len(W)`` of 0 to 3 (rows of K and
+    columns of W as 3-vectors of (r,) arrays). ``f`` (``m`` arrays) is ``nan`` where the
+    determinant is 0."""
+    mcount = len(K)
+    if mcount == 0:
+        return [], np.ones(r)
+    S = [[_dot(K[i], W[j]) for j in range(mcount)] for i in range(mcount)]
+    rhs = [K[i][1] for i in range(mcount)]  # -K g
+    if mcount == 1:
+        det = S[0][0]
+        inv = [[np.ones(r)]]
+    elif mcount == 2:
+        det = S[0][0] * S[1][1] - S[0][1] * S[1][0]
+        inv = [[S[1][1], -S[0][1]], [-S[1][0], S[0][0]]]
+    else:  # the adjugate: cofactors of the transposed matrix
+        def cof(i: int, j: int) -> FloatArray:
+            a, b = [x for x in range(3) if x != i], [y for y in range(3) if y != j]
+            return (-1.0) ** (i + j) * (S[a[0]][b[0]] * S[a[1]][b[1]] - S[a[0]][b[1]] * S[a[1]][b[0]])
+
+        inv = [[cof(j, i) for j in range(3)] for i in range(3)]
+        det = S[0][0] * inv[0][0] + S[0][1] * inv[1][0] + S[0][2] * inv[2][0]
+    safe = np.where(det != 0.0, det, np.nan)
+    return [sum(inv[i][j] * rhs[j] for j in range(mcount)) / safe for i in range(mcount)], det

@@ -135,3 +135,92 @@ def test_a_tall_block_falling_back_about_a_sticking_corner_is_found_at_every_sca
         assert falls[0]
         onto[name] = bool(on[0])
     assert onto == {"top": False, "left": True}
+
+
+def _falling_by_dense_solves(p, n, mu, live, com, k2, pp, pn, tol=1e-6):
+    """The contact problem from rest of :func:`falling_accelerations`, each instance and
+    mode assignment solved as the full square system (dynamics and kinematic rows) with
+    numpy's LU solver: the reference its closed-form elimination is pinned to."""
+    import itertools
+
+    unit = np.sqrt(k2)
+    falls = np.zeros(len(p), dtype=bool)
+    onto = np.zeros(len(p), dtype=bool)
+    for b in range(len(p)):
+        idx = np.flatnonzero(live[b])
+        d = (p[b, idx] - com[b]) / unit
+        nn, mm = n[b, idx], mu[b, idx]
+        tt = np.stack([-nn[:, 1], nn[:, 0]], axis=-1)
+        for assign in itertools.product(range(4), repeat=idx.size):  # free, stick, slide +, slide -
+            forces = [(j, u) for j, a in enumerate(assign) if a
+                      for u in ([nn[j], tt[j]] if a == 1 else [nn[j] - (1.0 if a == 2 else -1.0) * mm[j] * tt[j]])]
+            kin = [(j, e) for j, a in enumerate(assign) if a for e in ([nn[j], tt[j]] if a == 1 else [nn[j]])]
+            size = 3 + len(forces)
+            M = np.zeros((size, size))
+            M[:3, :3] = np.eye(3)
+            for c, (j, u) in enumerate(forces):
+                M[:3, 3 + c] = -np.array([u[0], u[1], d[j, 0] * u[1] - d[j, 1] * u[0]])
+            for r, (j, e) in enumerate(kin):
+                M[3 + r, :3] = [e[0], e[1], d[j, 0] * e[1] - d[j, 1] * e[0]]
+            if abs(np.linalg.det(M)) <= 1e-12 * np.abs(M).max() ** size:
+                continue
+            rhs = np.zeros(size)
+            rhs[1] = -1.0
+            x = np.linalg.solve(M, rhs)
+            acc, f = x[:3], x[3:]
+
+            def along(e, q):
+                return (acc[0] - acc[2] * q[1]) * e[0] + (acc[1] + acc[2] * q[0]) * e[1]
+
+            ok, c = True, 0
+            for j, a in enumerate(assign):
+                if a == 0:
+                    ok &= along(nn[j], d[j]) >= -tol
+                elif a == 1:
+                    ok &= f[c] >= -tol and abs(f[c + 1]) <= mm[j] * f[c] + tol
+                    c += 2
+                else:
+                    ok &= f[c] >= -tol and (1.0 if a == 2 else -1.0) * along(tt[j], d[j]) > tol
+                    c += 1
+            if ok and np.abs(acc).max() > tol:
+                falls[b] = True
+                onto[b] |= along(pn[b], (pp[b] - com[b]) / unit) < -tol
+    return falls, onto
+
+
+@pytest.mark.parametrize("count", [0, 1, 2, 3])
+def test_the_fall_from_rest_is_the_dense_solves_answer(count: int) -> None:
+    """The closed-form elimination of :func:`falling_accelerations` decides as solving
+    every assignment's full system does, on random contacts (some on a floor, some
+    absent, frictionless ones among them) and random probes."""
+    from geometry.forward import falling_accelerations
+
+    rng = np.random.default_rng(count)
+    b = 150
+    pts = rng.normal(0.0, 40.0, (b, max(count, 1), 2))
+    ang = rng.uniform(0.0, 2.0 * np.pi, pts.shape[:2])
+    nrm = np.stack([np.cos(ang), np.sin(ang)], axis=-1)
+    pts[: b // 3, :, 1] = 0.0
+    nrm[: b // 3] = [0.0, 1.0]
+    mu = rng.choice([0.0, 0.2, 0.6], pts.shape[:2])
+    live = rng.random(pts.shape[:2]) < (0.8 if count else 0.0)
+    com = rng.normal(0.0, 30.0, (b, 2))
+    k2 = 1500.0
+    pp = rng.normal(0.0, 40.0, (b, 2))
+    pa = rng.uniform(0.0, 2.0 * np.pi, b)
+    pn = np.stack([np.cos(pa), np.sin(pa)], axis=-1)
+    falls, onto = falling_accelerations(pts, nrm, mu, live, com, k2, pp, pn)
+    ref_falls, ref_onto = _falling_by_dense_solves(pts, nrm, mu, live, com, k2, pp, pn)
+    assert falls.tolist() == ref_falls.tolist()
+    assert onto.tolist() == ref_onto.tolist()
+    assert falls.any() and 0 < onto.sum() < b  # not a trivial answer
+    assert count < 2 or not falls.all()
+
+
+def test_a_fall_needs_a_positive_gyration() -> None:
+    from geometry.errors import GeometryError
+    from geometry.forward import falling_accelerations
+
+    with pytest.raises(GeometryError, match="gyration_sq"):
+        falling_accelerations([[[0.0, 0.0]]], [[[0.0, 1.0]]], [[0.5]], [[True]], [[0.0, 10.0]], 0.0,
+                              [[0.0, 20.0]], [[0.0, -1.0]])
