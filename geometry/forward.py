@@ -40,6 +40,7 @@ present, at most :data:`MAX_CONTACTS`).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass
@@ -222,82 +223,148 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
         np.put_along_axis(back, order[hit], modes, axis=1)  # back to the caller's columns
         found_modes[hit] = back
 
+    # per contact (first index) and instance, the rows giving r . n and r . t as
+    # row . xi, as components; their outer products and products with the other
+    # body's velocity: an assignment's normal equations are sums of them
+    rows_n = [np.ascontiguousarray(rn[..., e].T) for e in range(3)]
+    rows_t = [np.ascontiguousarray(rt[..., e].T) for e in range(3)]
+    wn_c, wt_c = np.ascontiguousarray(wn.T), np.ascontiguousarray(wt.T)
+    gram_n = {(e, f): rows_n[e] * rows_n[f] for e, f in _SYM}
+    gram_t = {(e, f): rows_t[e] * rows_t[f] for e, f in _SYM}
+    rhs_n = [rows_n[e] * wn_c for e in range(3)]
+    rhs_t = [rows_t[e] * wt_c for e in range(3)]
+    table = _assignments(k)  # every mode assignment, in enumeration order
+    stick_all, slide_all = table == _STICK, table == _SLIDE
     for gi, pr in enumerate(patterns):
-        in_group = group == gi
-        pending: list[tuple[IntArray, FloatArray, NDArray[np.int8], FloatArray]] = []
-        for assign in itertools.product((_FREE, _STICK, _SLIDE), repeat=k):
-            a = np.asarray(assign, dtype=np.int8)
-            if (pr & (a == _FREE)).any():  # a pressed finger keeps touching
-                continue
+        # the assignments this press pattern takes: a pressed finger keeps touching, and
+        # the equations (normal rows, pressed ones left out, and tangent rows of the
+        # sticking contacts) are at least 3
+        normal_all = (stick_all | slide_all) & ~pr[None, :]
+        usable = ~(pr[None, :] & (table == _FREE)).any(axis=1)
+        usable &= normal_all.sum(axis=1) + stick_all.sum(axis=1) >= 3
+        a_ids = np.flatnonzero(usable)
+        if not a_ids.size:
+            continue
+        stick, slide, normal_eq = stick_all[a_ids], slide_all[a_ids], normal_all[a_ids]
+        sel_n, sel_t = normal_eq.astype(float), stick.astype(float)
+        nonfree = table[a_ids] != _FREE
+        found: list[tuple[IntArray, IntArray, FloatArray, FloatArray]] = []  # (assignment, instance, xi, r_t)
+        members = np.flatnonzero(group == gi)
+        per_chunk = max(1, _PAIRS_PER_CHUNK // a_ids.size)
+        for lo_i in range(0, members.size, per_chunk):
+            r = members[lo_i:lo_i + per_chunk]
+            # least squares per (assignment, instance): the normal equations
+            # A^T A xi = A^T y, sums over the assignment's rows, solved in closed form;
+            # A must have rank 3, its smallest singular value at least _RANK_TOL of its
+            # largest (the square roots of A^T A's eigenvalues)
+            gram = {ef: sel_n @ gram_n[ef][:, r] + sel_t @ gram_t[ef][:, r] for ef in _SYM}
+            h = [sel_n @ rhs_n[e][:, r] + sel_t @ rhs_t[e][:, r] for e in range(3)]
+            lo, hi = _sym3_extreme_eigenvalues(gram)
             # padding slots must be FREE; instances with fewer contacts take the prefix
-            valid = in_group & ~((a[None, :] != _FREE) & ~live).any(axis=1) & ~ambiguous
-            stick, slide = a == _STICK, a == _SLIDE
-            normal_eq = (stick | slide) & ~pr
-            n_eq = int(normal_eq.sum()) + int(stick.sum())
-            if n_eq < 3 or not valid.any():
-                continue
-            idx = np.flatnonzero(valid)
-            A = np.concatenate([rn[idx][:, normal_eq], rt[idx][:, stick]], axis=1)  # (b', n_eq, 3)
-            y = np.concatenate([wn[idx][:, normal_eq], wt[idx][:, stick]], axis=1)
-            # least squares per instance; rank must be 3
-            sv = np.linalg.svd(A, compute_uv=False)
-            ok = sv[:, 2] > _RANK_TOL * np.maximum(sv[:, 0], 1e-300)
+            ok = ~(nonfree[:, None, :] & ~live[r][None, :, :]).any(axis=2)
+            ok &= lo > _RANK_TOL ** 2 * np.maximum(hi, 1e-300)
             if not ok.any():
                 continue
-            idx, A, y = idx[ok], A[ok], y[ok]
-            xi = np.linalg.solve(np.einsum("bki,bkj->bij", A, A), np.einsum("bki,bk->bi", A, y)[..., None])[..., 0]
-            resid = np.abs(np.einsum("bki,bi->bk", A, xi) - y).max(axis=1)
-            t0 = tol[idx]
-            r_n = np.einsum("bci,bi->bc", rn[idx], xi) - wn[idx]
-            r_t = np.einsum("bci,bi->bc", rt[idx], xi) - wt[idx]
-            lv = live[idx]
-            cons = resid <= t0
-            cons &= ~((r_n < -t0[:, None]) & lv & ~pr[None, :]).any(axis=1)  # nothing penetrates
-            cons &= ~(slide[None, :] & (np.abs(r_t) <= t0[:, None])).any(axis=1)  # sliding slides
-            differs = (np.abs((xi - plan[idx]) * weights) > same_tol * scale[idx, None]).any(axis=1)
+            xi = _sym3_solve(gram, h)  # 3 x (assignments, instances)
+            r_n = sum(rows_n[e][:, None, r] * xi[e][None] for e in range(3)) - wn_c[:, None, r]
+            r_t = sum(rows_t[e][:, None, r] * xi[e][None] for e in range(3)) - wt_c[:, None, r]
+            t0 = tol[r][None, None, :]
+            resid = np.maximum(np.where(normal_eq.T[..., None], np.abs(r_n), 0.0).max(axis=0),
+                               np.where(stick.T[..., None], np.abs(r_t), 0.0).max(axis=0))
+            cons = ok & (resid <= t0[0])
+            cons &= ~((r_n < -t0) & (live[r].T & ~pr[:, None])[:, None, :]).any(axis=0)  # nothing penetrates
+            cons &= ~(slide.T[..., None] & (np.abs(r_t) <= t0)).any(axis=0)  # sliding slides
+            differs = np.zeros_like(cons)
+            for e in range(3):
+                differs |= np.abs((xi[e] - plan[r, e][None]) * weights[e]) > same_tol * scale[r][None]
             cons &= differs
-            if not cons.any():
-                continue
-            idx, xi, r_t = idx[cons], xi[cons], r_t[cons]
-            modes = np.where(live[idx], np.where(stick, mechanics.ContactMode.STICKING,
-                                                 np.where(slide, mechanics.ContactMode.SLIDING,
-                                                          mechanics.ContactMode.SEPARATING)),
-                             mechanics.ContactMode.ABSENT).astype(np.int8)
-            sdir = np.where((slide[None, :] & live[idx])[..., None], np.sign(r_t)[..., None] * tvec[idx], 0.0)
-            if pr.any():  # the force LPs of all the group's assignments in one call, after the loop
-                pending.append((idx, xi, modes, sdir))
-                continue
-            contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
-                                                  np.where(live[idx], m[idx], 0.0), modes, sdir)
+            ai, ii = np.nonzero(cons)
+            if ai.size:
+                found.append((ai, r[ii], np.stack([x[ai, ii] for x in xi], axis=-1), r_t[:, ai, ii].T))
+        if not found:
+            continue
+        ai = np.concatenate([q[0] for q in found])
+        idx = np.concatenate([q[1] for q in found])
+        xi = np.concatenate([q[2] for q in found])
+        r_t = np.concatenate([q[3] for q in found])
+        at = np.lexsort((idx, ai))  # enumeration order: by assignment, then instance
+        ai, idx, xi, r_t = ai[at], idx[at], xi[at], r_t[at]
+        st, sl = stick[ai], slide[ai]
+        modes = np.where(live[idx], np.where(st, mechanics.ContactMode.STICKING,
+                                             np.where(sl, mechanics.ContactMode.SLIDING,
+                                                      mechanics.ContactMode.SEPARATING)),
+                         mechanics.ContactMode.ABSENT).astype(np.int8)
+        sdir = np.where((sl & live[idx])[..., None], np.sign(r_t)[..., None] * tvec[idx], 0.0)
+        contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
+                                              np.where(live[idx], m[idx], 0.0), modes, sdir)
+        if not pr.any():  # the balance of the assignment's force sets: closed cones
             feas = mechanics.feasible_batch(contacts, cm[idx], L, margin=0.0)
-            _record(idx[feas], xi[feas], modes[feas])
-        if pending:
-            idx = np.concatenate([q[0] for q in pending])
-            xi = np.concatenate([q[1] for q in pending])
-            modes = np.concatenate([q[2] for q in pending])
-            sdir = np.concatenate([q[3] for q in pending])
-            contacts = mechanics.Contacts.trusted(p[idx], np.where(live[idx][..., None], n[idx], 0.0),
-                                                  np.where(live[idx], m[idx], 0.0), modes, sdir)
-            if int(pr.sum()) == 1:  # one pressed contact: exact cone tests
-                slot = int(np.flatnonzero(pr)[0])
-                feas = mechanics.pressed_feasible(contacts, cm[idx], L, np.full(idx.size, slot), press[idx, slot])
-            else:  # one "finger" per press group, its force the group's pressed value: the LP
-                gid = grp_id[idx]
-                ids = np.unique(gid[:, pr])
-                finger_of = np.where(pr[None, :], np.searchsorted(ids, gid), -1)
-                held = np.full((idx.size, ids.size), np.nan)
-                for j, g in enumerate(ids):
-                    top = np.where(pr[None, :] & (gid == g), press[idx], -np.inf).max(axis=1)
-                    held[:, j] = np.where(np.isfinite(top), top, np.nan)
-                feas = mechanics.bounded_support(contacts, cm[idx], L, 1.0, finger_of, None, margin=0.0,
-                                                 fingers=ids.size, pressed=held).feasible
-            # the first consistent alternative of each instance, in enumeration order
-            first = np.zeros(idx.size, dtype=bool)
-            _, at = np.unique(np.where(feas, idx, -1), return_index=True)
-            first[at] = True
-            keep = feas & first
-            _record(idx[keep], xi[keep], modes[keep])
+        elif int(pr.sum()) == 1:  # one pressed contact: exact cone tests
+            slot = int(np.flatnonzero(pr)[0])
+            feas = mechanics.pressed_feasible(contacts, cm[idx], L, np.full(idx.size, slot), press[idx, slot])
+        else:  # one "finger" per press group, its force the group's pressed value: the LP
+            gid = grp_id[idx]
+            ids = np.unique(gid[:, pr])
+            finger_of = np.where(pr[None, :], np.searchsorted(ids, gid), -1)
+            held = np.full((idx.size, ids.size), np.nan)
+            for j, g in enumerate(ids):
+                top = np.where(pr[None, :] & (gid == g), press[idx], -np.inf).max(axis=1)
+                held[:, j] = np.where(np.isfinite(top), top, np.nan)
+            feas = mechanics.bounded_support(contacts, cm[idx], L, 1.0, finger_of, None, margin=0.0,
+                                             fingers=ids.size, pressed=held).feasible
+        # the first consistent alternative of each instance, in enumeration order
+        first = np.zeros(idx.size, dtype=bool)
+        _, at = np.unique(np.where(feas, idx, -1), return_index=True)
+        first[at] = True
+        keep = feas & first
+        _record(idx[keep], xi[keep], modes[keep])
     return ForwardCheck(ambiguous, found_twist, found_modes)
+
+
+#: (assignment, instance) pairs :func:`alternative_motions` evaluates at once.
+_PAIRS_PER_CHUNK = 1 << 16
+
+
+@functools.lru_cache(maxsize=None)
+def _assignments(k: int) -> NDArray[np.int8]:
+    """Every assignment of FREE, STICK, SLIDE to ``k`` contacts, (3^k, k), in
+    :func:`itertools.product` order."""
+    return np.array(list(itertools.product((_FREE, _STICK, _SLIDE), repeat=k)), dtype=np.int8).reshape(-1, k)
+
+
+#: The upper triangle of a symmetric 3 x 3 matrix, as (row, column) pairs.
+_SYM = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def _sym3_extreme_eigenvalues(g: dict[tuple[int, int], FloatArray]) -> tuple[FloatArray, FloatArray]:
+    """The smallest and largest eigenvalues of symmetric 3 x 3 matrices (upper triangle
+    ``g``, arrays over instances), by the trigonometric solution of the characteristic
+    cubic (absolute error a few ulps of the largest)."""
+    a, b, c, d, e, f = (g[ef] for ef in _SYM)  # [[a b c] [b d e] [c e f]]
+    q = (a + d + f) / 3.0
+    p1 = b * b + c * c + e * e
+    a0, d0, f0 = a - q, d - q, f - q
+    p = np.sqrt((a0 * a0 + d0 * d0 + f0 * f0 + 2.0 * p1) / 6.0)
+    safe = np.where(p > 0.0, p, 1.0)
+    # det((G - q I) / p) / 2, clipped to [-1, 1]
+    det = (a0 * (d0 * f0 - e * e) - b * (b * f0 - e * c) + c * (b * e - d0 * c)) / (2.0 * safe ** 3)
+    phi = np.arccos(np.clip(det, -1.0, 1.0)) / 3.0
+    hi = np.where(p > 0.0, q + 2.0 * p * np.cos(phi), q)
+    lo = np.where(p > 0.0, q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0), q)
+    return lo, hi
+
+
+def _sym3_solve(g: dict[tuple[int, int], FloatArray], h: list[FloatArray]) -> list[FloatArray]:
+    """``x`` with ``G x = h`` for symmetric 3 x 3 matrices ``G`` (upper triangle ``g``,
+    arrays over instances), by the adjugate; ``nan`` where ``G`` is singular."""
+    a, b, c, d, e, f = (g[ef] for ef in _SYM)
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    safe = np.where(det != 0.0, det, np.nan)
+    return [(c00 * h[0] + c01 * h[1] + c02 * h[2]) / safe,
+            (c01 * h[0] + c11 * h[1] + c12 * h[2]) / safe,
+            (c02 * h[0] + c12 * h[1] + c22 * h[2]) / safe]
 
 
 def gyration_sq(vertices: ArrayLike, com: ArrayLike) -> float:

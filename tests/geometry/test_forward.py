@@ -224,3 +224,74 @@ def test_a_fall_needs_a_positive_gyration() -> None:
     with pytest.raises(GeometryError, match="gyration_sq"):
         falling_accelerations([[[0.0, 0.0]]], [[[0.0, 1.0]]], [[0.5]], [[True]], [[0.0, 10.0]], 0.0,
                               [[0.0, 20.0]], [[0.0, -1.0]])
+
+
+def _alternatives_by_dense_least_squares(p, n, mu, live, w, com, L, plan, tol_rel=1e-3, same=0.02):
+    """:func:`alternative_motions` (no presses) one instance and assignment at a time:
+    the kinematic equations by numpy's SVD and least squares, the balance by
+    :func:`geometry.mechanics.feasible_batch`: the reference its batched closed form is
+    pinned to."""
+    import itertools
+
+    out = np.zeros(len(p), dtype=bool)
+    for b in range(len(p)):
+        idx = np.flatnonzero(live[b])
+        d = p[b, idx] - com[b]
+        nn = n[b, idx]
+        tt = np.stack([-nn[:, 1], nn[:, 0]], axis=-1)
+        rn = np.column_stack([nn, d[:, 0] * nn[:, 1] - d[:, 1] * nn[:, 0]])
+        rt = np.column_stack([tt, d[:, 0] * tt[:, 1] - d[:, 1] * tt[:, 0]])
+        wn, wt = (w[b, idx] * nn).sum(1), (w[b, idx] * tt).sum(1)
+        scale = max(np.abs(plan[b, :2]).max(), abs(plan[b, 2]) * L, np.linalg.norm(w[b], axis=-1).max())
+        tol = max(tol_rel * scale, 1e-12)
+        for assign in itertools.product(range(3), repeat=idx.size):  # free, stick, slide
+            a = np.array(assign)
+            A = np.vstack([rn[a > 0], rt[a == 1]])
+            y = np.concatenate([wn[a > 0], wt[a == 1]])
+            if len(A) < 3:
+                continue
+            sv = np.linalg.svd(A, compute_uv=False)
+            if not sv[2] > 1e-6 * sv[0]:
+                continue
+            xi = np.linalg.lstsq(A, y, rcond=None)[0]
+            r_n, r_t = rn @ xi - wn, rt @ xi - wt
+            if (np.abs(A @ xi - y).max() > tol or (r_n < -tol).any() or (np.abs(r_t[a == 2]) <= tol).any()
+                    or not (np.abs((xi - plan[b]) * [1.0, 1.0, L]) > same * scale).any()):
+                continue
+            modes = np.choose(a, [mechanics.ContactMode.SEPARATING, mechanics.ContactMode.STICKING,
+                                  mechanics.ContactMode.SLIDING]).astype(np.int8)
+            sdir = np.where((a == 2)[:, None], np.sign(r_t)[:, None] * tt, 0.0)
+            contacts = mechanics.Contacts.trusted(p[b, idx][None], nn[None], mu[b, idx][None], modes[None], sdir[None])
+            if mechanics.feasible_batch(contacts, com[b][None], L, margin=0.0)[0]:
+                out[b] = True
+                break
+    return out
+
+
+@pytest.mark.parametrize("count", [3, 4])
+def test_the_other_motions_are_the_dense_least_squares_answer(count: int) -> None:
+    """The batched closed-form least squares of :func:`alternative_motions` finds another
+    motion exactly where solving every instance's every assignment with numpy's SVD and
+    least squares does: a block on a floor (some contacts absent) pushed by a finger."""
+    rng = np.random.default_rng(10 + count)
+    b = 120
+    pts = np.zeros((b, count, 2))
+    nrm = np.zeros((b, count, 2))
+    pts[:, :2, 0] = [0.0, 10.0]
+    nrm[:, :2] = [0.0, 1.0]  # the floor under both corners
+    h = rng.uniform(2.0, 20.0, (b, count - 2))
+    pts[:, 2:, 1] = h
+    nrm[:, 2:, 0] = 1.0  # fingers on the left side
+    pts[:, 2:, 0] = 0.0
+    live = np.ones((b, count), dtype=bool)
+    live[rng.random(b) < 0.3, 1] = False
+    mu = rng.choice([0.0, 0.3, 1.0], (b, count))
+    w = np.zeros((b, count, 2))
+    w[:, 2:, 0] = 1.0
+    w[:, 2:, 1] = rng.uniform(-0.3, 0.3, (b, count - 2))
+    com = np.broadcast_to(COM, (b, 2)).copy()
+    plan = np.array([_tip_twist(float(x))[0] for x in h[:, 0]])
+    got = alternative_motions(pts, nrm, mu, live, w, com, 22.0, plan).ambiguous
+    want = _alternatives_by_dense_least_squares(pts, nrm, mu, live, w, com, 22.0, plan)
+    assert got.tolist() == want.tolist()
+    assert 0 < got.sum() < b
