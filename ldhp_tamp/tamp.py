@@ -241,7 +241,7 @@ def _give_up(scenario: Scenario, engine: str, after: str, c: _Counters, clock: _
 def _annotate(plan: Plan, scenario: Scenario) -> Plan:
     """``plan`` with each waypoint's ``finger_forces`` and, in its stats, the support
     margin, where it is least and the largest finger force (``validate.support_analysis``)."""
-    a = support_analysis(plan, scenario)
+    a = support_analysis(plan, scenario, worst_only=True)
     forces = iter(a.finger_forces.tolist())
     steps = tuple(replace(s, waypoints=tuple(
         replace(w, finger_forces=tuple(None if np.isnan(f).any() else (f[0], f[1]) for f in next(forces)))

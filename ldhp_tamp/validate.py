@@ -687,7 +687,8 @@ class SupportAnalysis:
         return float(f.max()) if f.size else 0.0
 
 
-def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUNDS) -> SupportAnalysis:
+def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUNDS, *,
+                     worst_only: bool = False) -> SupportAnalysis:
     """The friction each waypoint needs and the finger forces that hold the object.
 
     Rule 8's contacts and modes (:func:`plan_contacts`, the motion to the next waypoint;
@@ -708,6 +709,12 @@ def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUND
     scenario : Scenario
     rounds : int
         Bisection rounds (bracket width ``2**-rounds``).
+    worst_only : bool
+        Only :attr:`SupportAnalysis.margin`, ``worst`` and ``worst_at`` are wanted: a
+        waypoint whose bracket lies wholly below another's leaves the bisection (it cannot
+        be the worst), and its ``friction_needed`` is its bracket's upper end then, an
+        upper bound below the worst's value. The worst waypoint and its value are the
+        same as without.
 
     Returns
     -------
@@ -736,9 +743,10 @@ def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUND
     max_force = getattr(world.gripper, "max_force", None)
     scale = world.object.length_scale
     press = press_table(plan)
+    floor = [-math.inf]  # worst_only: a lower bound of the worst waypoint's value
     for b in _support_batches(world, flat):
         g = b.rows
-        need[g] = _friction_needed(b.moving, b.com, scale, rounds)
+        need[g] = _friction_needed(b.moving, b.com, scale, rounds, floor if worst_only else None)
         lp = np.isfinite(need[g]) & (b.fingers >= 0).any(axis=1)
         if lp.any():
             pr = press[g[lp]]
@@ -752,9 +760,14 @@ def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUND
     return SupportAnalysis(need, forces, largest, flat.step, flat.local)
 
 
-def _friction_needed(contacts: mechanics.Contacts, com: FloatArray, scale: float, rounds: int) -> FloatArray:
+def _friction_needed(contacts: mechanics.Contacts, com: FloatArray, scale: float, rounds: int,
+                     floor: list[float] | None = None) -> FloatArray:
     """The least scale ``f`` in [0, 1] of every ``mu`` with which ``contacts`` balance the
-    weight (closed cones), by vectorised bisection; ``inf`` where not even at 1."""
+    weight (closed cones), by vectorised bisection; ``inf`` where not even at 1.
+
+    With ``floor`` (a one-item list: a lower bound of the largest value over every batch,
+    raised here as brackets close), an instance whose bracket's upper end falls below it
+    leaves the bisection with that upper end: only the largest value is exact."""
     out = np.full(contacts.batch, np.inf)
     ok = mechanics.feasible_batch(contacts, com, scale, margin=0.0)
     free = np.zeros(contacts.batch, dtype=bool)
@@ -766,11 +779,18 @@ def _friction_needed(contacts: mechanics.Contacts, com: FloatArray, scale: float
         return out
     sub, com_s = contacts.select(todo), com[todo]
     lo, hi = np.zeros(todo.size), np.ones(todo.size)
+    live = np.arange(todo.size)
     for _ in range(rounds):
-        mid = 0.5 * (lo + hi)
-        f = mechanics.feasible_batch(sub.with_mu(sub.mu * mid[:, None]), com_s, scale, margin=0.0)
-        hi = np.where(f, mid, hi)
-        lo = np.where(f, lo, mid)
+        if floor is not None:  # brackets wholly below another's cannot hold the largest value
+            floor[0] = max(floor[0], float(lo[live].max(initial=-math.inf)))
+            live = live[hi[live] >= floor[0]]
+            if not live.size:
+                break
+        mid = 0.5 * (lo[live] + hi[live])
+        part = sub if live.size == todo.size else sub.select(live)
+        f = mechanics.feasible_batch(part.with_mu(part.mu * mid[:, None]), com_s[live], scale, margin=0.0)
+        hi[live] = np.where(f, mid, hi[live])
+        lo[live] = np.where(f, lo[live], mid)
     out[todo] = hi
     return out
 

@@ -726,3 +726,25 @@ def test_friction_needed_is_inf_exactly_where_rules_7_or_8_fail(path: Path, pick
     assert ((a.friction_needed[held] >= 0) & (a.friction_needed[held] <= 1)).all()
     touched = held[:, None] & flat.declared
     assert np.isfinite(a.finger_forces[touched]).all() and np.isnan(a.finger_forces[~touched]).all()
+
+
+@pytest.mark.parametrize("name", ["task1_zero_mobility_lift_tilt70", "gen_slot_corner_start", "cmgmp_book_stand_up"])
+def test_the_worst_waypoint_alone_is_the_full_analysis_worst(name: str) -> None:
+    """``worst_only`` (what a solve writes into its plan's stats) drops waypoints from the
+    bisection once another's bracket lies above theirs: the margin, where it is least and
+    the forces are the full analysis's, and every value it leaves inexact is below the
+    worst's."""
+    from ldhp_tamp.validate import support_analysis
+
+    root = Path(__file__).resolve().parents[2]
+    scenario = load_scenario(root / "scenarios" / f"{name}.toml")
+    plan = read_plan(root / "docs" / "results" / "plans" / f"{name}-plan.json")
+    full = support_analysis(plan, scenario)
+    worst = support_analysis(plan, scenario, worst_only=True)
+    assert worst.margin == full.margin and worst.worst_at == full.worst_at
+    assert worst.finger_forces.tobytes() == full.finger_forces.tobytes()
+    assert worst.largest_finger_force == full.largest_finger_force
+    inexact = worst.friction_needed != full.friction_needed
+    assert inexact.any()  # the pruning happened
+    assert (worst.friction_needed[inexact] >= full.friction_needed[inexact]).all()
+    assert (worst.friction_needed[inexact] < full.friction_needed.max()).all()
