@@ -54,6 +54,7 @@ __all__ = [
     "motion_conditioned",
     "press_forces",
     "rate_motion_grasps",
+    "row_groups",
     "within_force_limit",
 ]
 
@@ -894,11 +895,11 @@ def _keys(rows: _Rows) -> IntArray:
     return np.concatenate([k, rows.part.astype(np.int64)], axis=1)
 
 
-def _key_groups(keys: IntArray) -> tuple[IntArray, IntArray]:
-    """Equal rows of ``keys`` (N, M) grouped: each row's group id (ids 0.., in no
-    particular order) and each group's first row (by index). What ``np.unique(keys,
-    axis=0, return_inverse=True, return_index=True)`` gives up to the ids' order, by a
-    lexicographic sort of the columns (``np.unique`` sorts rows as opaque bytes: several
+def row_groups(keys: IntArray) -> tuple[IntArray, IntArray]:
+    """Equal rows of integer ``keys`` (N, M) grouped: each row's group id and each
+    group's first row (by index), the ids numbering the distinct rows in lexicographic
+    order: what ``np.unique(keys, axis=0, return_inverse=True, return_index=True)``
+    gives, by a sort of the columns (``np.unique`` sorts the rows as records: several
     times slower)."""
     n = keys.shape[0]
     if n == 0:
@@ -979,12 +980,12 @@ def enumerate_grasps(world: World, options: GraspOptions | None = None) -> Grasp
         blocks += [rows, flips]
     allrows = _Rows.concat(blocks)
     keys = _keys(allrows)
-    first = np.sort(_key_groups(keys)[1])
+    first = np.sort(row_groups(keys)[1])
     allrows, keys = allrows.take(first), keys[first]
 
     # flipped[g]: the row whose key equals the key of flip(g).
     fkeys = _keys(_flip(allrows, pad, eps))
-    inv, _ = _key_groups(np.concatenate([keys, fkeys]))
+    inv, _ = row_groups(np.concatenate([keys, fkeys]))
     g = len(allrows)
     row_of = np.full(int(inv.max(initial=-1)) + 1, -1, dtype=np.int64)
     row_of[inv[:g]] = np.arange(g)

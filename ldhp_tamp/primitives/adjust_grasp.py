@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry import collision, mechanics
 from geometry.contacts import contact_points, rests_alone
-from geometry.grasps import NO_CONTACT, FingerPart, GraspSet
+from geometry.grasps import NO_CONTACT, FingerPart, GraspSet, row_groups
 from geometry.poses import BoolArray, IntArray, Pose, compose_batch, wrap_angle
 from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS, PENETRATION_TOL, WAYPOINT_STEP
@@ -410,8 +410,7 @@ def _groups(keys: IntArray, rows: IntArray, size: int) -> _Groups:
     of = np.full(size, -1, dtype=np.int64)
     if rows.size == 0:
         return _Groups(of, np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64))
-    _, inv = np.unique(keys, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
+    inv, _ = row_groups(np.asarray(keys, dtype=np.int64))
     order = np.argsort(inv, kind="stable")
     counts = np.bincount(inv)
     of[rows] = inv
