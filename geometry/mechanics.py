@@ -729,10 +729,13 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
             if todo.size > _COMPACT * b:  # too few accepted to pay for the gathers
                 _triples(A, C, GE, LE, n, 1, n - 2, acc)
             elif todo.size:
-                tail = slice(off[1], None)  # the pairs (j, k), 1 <= j < k, of the triples left
+                # the pairs (j, k), 1 <= j < k, of the triples left: their crosses gathered
+                # (mode "clip" skips take's buffered bounds check; the indices are valid),
+                # their sign tests recomputed from them (cheaper than gathering them)
+                Ct = np.take(C[off[1]:], todo, axis=1, mode="clip")
                 sub = np.zeros(todo.size, dtype=bool)
-                _triples(np.take(A, todo, axis=1), np.take(C[tail], todo, axis=1), np.take(GE[tail], todo, axis=1),
-                         np.take(LE[tail], todo, axis=1), n, 1, n - 2, sub, off[1])
+                _triples(np.take(A, todo, axis=1, mode="clip"), Ct, np.greater_equal(Ct, -_CROSS_TOL),
+                         np.less_equal(Ct, _CROSS_TOL), n, 1, n - 2, sub, off[1])
                 acc[todo] = sub
         # A one- or two-generator certificate needs a pair with |c_jk| <= |r| <= 3 tol
         # (|p| <= 1.5, |A| <= 1): only such instances go to the degenerate test.
@@ -742,7 +745,7 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
             small = np.less_equal(C, 3.0 * _DEGENERATE_TOL, out=GE).any(axis=0)
             rest = np.flatnonzero(small & ~acc)
         elif rest.size:
-            Cr = np.take(C, rest, axis=1)
+            Cr = np.take(C, rest, axis=1, mode="clip")
             rest = rest[(np.abs(Cr, out=Cr) <= 3.0 * _DEGENERATE_TOL).any(axis=0)]
     else:
         rest = np.flatnonzero(~acc)
