@@ -544,8 +544,10 @@ def _generators_chunk(
     those of the edge-by-edge formula ``(n + m t) / sqrt(1 + m^2)``.
     """
     # (C, b) blocks, instances contiguous: one transposing copy per input
-    modes = np.ascontiguousarray(contacts.modes[sl].T)
-    pen = (modes == _PENETRATING).any(axis=0)
+    md = contacts.modes[sl]
+    # every contact STICKING or ROLLING (codes 1 and 2; ABSENT = 0 wraps to 255): full
+    # cones everywhere, no mode masks needed
+    all_full = md.size > 0 and int((md.view(np.uint8) - np.uint8(1)).max()) <= 1
     pts = np.ascontiguousarray(contacts.points[sl].transpose(2, 1, 0))
     nx, ny = np.ascontiguousarray(contacts.normals[sl].transpose(2, 1, 0))
     mus = np.ascontiguousarray((contacts.mu[sl] if mu_override is None else mu_override).T)
@@ -557,44 +559,54 @@ def _generators_chunk(
     rx *= il
     ry = pts[1] - cy
     ry *= il
-    full = modes == _STICKING
-    full |= modes == _ROLLING
-    sliding = modes == _SLIDING
-    C, b = modes.shape
+    C, b = mu.shape
     G = np.empty((3, C, 2, b))  # (x, y, z) x contact x edge x instance
     mny = mu * ny
     mnx = mu * nx
     root = mu * mu
     root += 1.0
     np.sqrt(root, out=root)
-    inv = np.divide(full, root)
+    X, Y, Z = G  # (C, 2, b) each: edge 0 and edge 1 of every contact
     # edge 1: n - mu t, i.e. m = -mu: (nx + mu ny, ny - mu nx) / sqrt(1 + mu^2)
-    X1, Y1, Z1 = G[0, :, 1], G[1, :, 1], G[2, :, 1]
-    np.add(nx, mny, out=X1)
-    X1 *= inv
-    np.subtract(ny, mnx, out=Y1)
-    Y1 *= inv
-    # edge 0: n + mA t, mA = mu, or -sign(s.t) mu when sliding (the edge opposing sliding)
-    X0, Y0, Z0 = G[0, :, 0], G[1, :, 0], G[2, :, 0]
-    if sliding.any():
-        sdx, sdy = np.ascontiguousarray(contacts.slide_dirs[sl].transpose(2, 1, 0))
-        st = -sdx * ny + sdy * nx
-        mA = np.where(sliding, -np.sign(st) * mu, mu)
-        invA = (full | sliding) / np.sqrt(1.0 + mA * mA)
-        np.subtract(nx, mA * ny, out=X0)
-        X0 *= invA
-        np.add(ny, mA * nx, out=Y0)
-        Y0 *= invA
+    np.add(nx, mny, out=X[:, 1])
+    np.subtract(ny, mnx, out=Y[:, 1])
+    if all_full:
+        pen = np.zeros(b, dtype=bool)
+        inv = np.divide(1.0, root, out=root)  # = full / root with full all True
+        # edge 0: n + mu t
+        np.subtract(nx, mny, out=X[:, 0])
+        np.add(ny, mnx, out=Y[:, 0])
+        X *= inv[:, None]
+        Y *= inv[:, None]
     else:
-        np.subtract(nx, mny, out=X0)
-        X0 *= inv
-        np.add(ny, mnx, out=Y0)
-        Y0 *= inv
-    tmp = np.empty((C, b))
-    for X, Y, Z in ((X0, Y0, Z0), (X1, Y1, Z1)):
-        np.multiply(rx, Y, out=Z)
-        np.multiply(ry, X, out=tmp)
-        Z -= tmp
+        modes = np.ascontiguousarray(md.T)
+        pen = (modes == _PENETRATING).any(axis=0)
+        full = modes == _STICKING
+        full |= modes == _ROLLING
+        sliding = modes == _SLIDING
+        inv = np.divide(full, root)
+        X[:, 1] *= inv
+        Y[:, 1] *= inv
+        # edge 0: n + mA t, mA = mu, or -sign(s.t) mu when sliding (the edge opposing sliding)
+        X0, Y0 = X[:, 0], Y[:, 0]
+        if sliding.any():
+            sdx, sdy = np.ascontiguousarray(contacts.slide_dirs[sl].transpose(2, 1, 0))
+            st = -sdx * ny + sdy * nx
+            mA = np.where(sliding, -np.sign(st) * mu, mu)
+            invA = (full | sliding) / np.sqrt(1.0 + mA * mA)
+            np.subtract(nx, mA * ny, out=X0)
+            X0 *= invA
+            np.add(ny, mA * nx, out=Y0)
+            Y0 *= invA
+        else:
+            np.subtract(nx, mny, out=X0)
+            X0 *= inv
+            np.add(ny, mnx, out=Y0)
+            Y0 *= inv
+    # Z = r x (X, Y) for both edges at once
+    np.multiply(rx[:, None], Y, out=Z)
+    tmp = np.multiply(ry[:, None], X)
+    Z -= tmp
     return G.reshape(3, 2 * C, b), pen
 
 
