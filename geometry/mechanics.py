@@ -677,11 +677,13 @@ def _reduce_to_ey(X: Rows, Y: Rows, Z: Rows, t: FloatArray) -> tuple[Rows, Rows,
     linear maps.
     """
     tx, ty, tz = t
-    ax, ay, az = np.abs(tx), np.abs(ty), np.abs(tz)
-    zero = np.maximum(np.maximum(ax, ay), az) == 0.0
-    if (ty > 0).all() and (ay >= ax).all() and (ay >= az).all():
+    ax, az = np.abs(tx), np.abs(tz)
+    if (ty > 0).all() and (ty >= ax).all() and (ty >= az).all():  # no target zero, none to permute
+        zero = np.zeros(ty.shape, dtype=bool)
         u, v, w = tx, ty, tz
     else:  # permute coordinates so that the largest |component| sits in the middle slot
+        ay = np.abs(ty)
+        zero = np.maximum(np.maximum(ax, ay), az) == 0.0
         kx = (ax >= ay) & (ax >= az)
         kz = ~kx & (az > ay)
         sgn = np.where(kx, np.sign(tx), np.where(kz, np.sign(tz), np.sign(ty)))
