@@ -716,7 +716,10 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
     The crosses are one (pairs, b) array in lexicographic order (:func:`_triples`). The
     answer is the OR over the triples, so an instance accepted by a triple needs no other:
     after the triples of the first generator (most certificates among them), the
-    instances still open are gathered and only they meet the other triples.
+    instances still open are gathered and only they meet the other triples, which are all
+    the triples of generators 1 .. n-1 (:func:`_triples_grid`, on their crosses gathered
+    into the upper triangle of an (n-1, n-1, open) array). Every triple's determinant and
+    sign tests are the same operations on the same values whichever way it is taken.
     """
     acc = np.zeros(b, dtype=bool)
     # the generator slots not zero in every instance (a first element decides most)
