@@ -785,17 +785,16 @@ def _contains_reduced(P: Rows, Q: Rows, A: Rows, b: int) -> BoolArray:
 _COMPACT: float = 0.75
 
 
-def _triples(A: Rows, C: Rows, GE: BoolArray, LE: BoolArray, n: int, first: int, stop: int, acc: BoolArray,
-             base: int = 0) -> None:
+def _triples(A: Rows, C: Rows, GE: BoolArray, LE: BoolArray, n: int, first: int, stop: int, acc: BoolArray) -> None:
     """``acc |=`` the certificates of the triples (i, j, k), ``first <= i < stop``, of n
-    generators. Pair (j, k) is row ``off[j] + k - j - 1 - base`` of ``C`` (its crosses),
+    generators. Pair (j, k) is row ``off[j] + k - j - 1`` of ``C`` (its crosses),
     ``GE`` (``c >= -tol``) and ``LE`` (``c <= tol``), ``off`` from :func:`_pair_offsets`.
 
     For a fixed (i, j) the triples (i, j, k > j) need the rows (j, k) and (i, k) as two
     contiguous blocks and the row (i, j): their determinants are three block operations
     with the same products and sums, in the same order, as triple by triple.
     """
-    off = [o - base for o in _pair_offsets(n)]
+    off = _pair_offsets(n)
     b = acc.shape[0]
     D = np.empty((n - 2, b))
     T = np.empty((n - 2, b))
