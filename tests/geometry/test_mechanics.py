@@ -478,6 +478,62 @@ def test_fast_path_decides_as_its_triple_by_triple_definition(count: int):
     assert (fast == slow).all(), np.flatnonzero(fast != slow)[:10]
 
 
+def _edges_one_by_one(c: Contacts, com: np.ndarray, L: float) -> np.ndarray:
+    """The generators edge by edge: ``(n + m t) * (1 / sqrt(1 + m^2))`` with ``m = mu``
+    (or, sliding, ``-sign(s.t) mu``) for slot 2i and ``m = -mu`` for slot 2i+1, zero
+    where the mode gives no such edge, and ``Z = r x (X, Y)`` with ``r = (p - com) / L``."""
+    B, C = c.modes.shape
+    out = np.zeros((B, 2 * C, 3))
+    for i in range(C):
+        n, p, md = c.normals[:, i], c.points[:, i], c.modes[:, i]
+        mu = np.where(c.mu[:, i] < mech.MU_ZERO, 0.0, c.mu[:, i])
+        full, sliding = (md == S) | (md == R), md == SL
+        st = -c.slide_dirs[:, i, 0] * n[:, 1] + c.slide_dirs[:, i, 1] * n[:, 0]
+        rx, ry = (p[:, 0] - com[0]) * (1.0 / L), (p[:, 1] - com[1]) * (1.0 / L)
+        for e, m, on in ((0, np.where(sliding, -np.sign(st) * mu, mu), full | sliding), (1, -mu, full)):
+            inv = on / np.sqrt(1.0 + m * m)
+            x = (n[:, 0] - m * n[:, 1]) * inv
+            y = (n[:, 1] + m * n[:, 0]) * inv
+            out[:, 2 * i + e] = np.stack([x, y, rx * y - ry * x], -1)
+    return out
+
+
+@pytest.mark.parametrize("full", [False, True])
+def test_generators_are_the_edges_bit_for_bit(full: bool):
+    """Both generator builds (a chunk whose contacts are all STICKING or ROLLING skips the
+    mode masks) give the edge-by-edge values exactly."""
+    rng = np.random.default_rng(7)
+    c, com, L = degenerate_instances(rng, 3000, 4)
+    if full:
+        c = c.with_modes(rng.choice([S, R], c.modes.shape))
+    com = np.array([3.0, -2.0])
+    g, _ = wrench_generators(c, com, L)
+    assert np.array_equal(g, _edges_one_by_one(c, com, L))
+
+
+@pytest.mark.parametrize("count", [3, 4, 5, 8])
+@pytest.mark.parametrize("compact", [0.0, 1.0])
+@pytest.mark.parametrize("full", [False, True])
+def test_fast_path_stages_decide_as_their_definition(count: int, compact: float, full: bool, monkeypatch):
+    """Both ways the kernel takes the triples left after the first generator's (on the
+    whole chunk, or gathered into the grid of the open instances: ``_COMPACT`` forces
+    each) and both generator builds (every contact STICKING or ROLLING, or any modes)
+    decide every instance as the certificate rule written out one instance at a time."""
+    monkeypatch.setattr(mech, "_COMPACT", compact)
+    rng = np.random.default_rng(2000 + count)
+    n = 500 if count < 8 else 200
+    c, com, L = degenerate_instances(rng, n, count)
+    if full:
+        c = c.with_modes(rng.choice([S, R], c.modes.shape))
+    margin = np.where(rng.random(n) < 0.5, FEASIBILITY_MARGIN, rng.uniform(-0.05, 0.2, n))
+    fast = feasible_batch(c, com, L, margin)
+    gens, pen = wrench_generators(c, com, L)
+    slow = np.array([not pen[i] and _decide_one(gens[i], np.array([0.0, 1.0, 0.0]), float(margin[i]))
+                     for i in range(n)])
+    assert (fast == slow).all(), np.flatnonzero(fast != slow)[:10]
+    assert fast.any() and not fast.all()  # both outcomes
+
+
 # --------------------------------------------------------------------------------------
 # Properties
 # --------------------------------------------------------------------------------------
