@@ -266,10 +266,13 @@ def _masks(world: World, poses: FloatArray, tol: float) -> ContactMasks:
     puts an object point within ``tol`` of the segment ``e_j``, so only the (pose, edge)
     pairs whose bounding disk of the object comes within ``tol`` (plus
     :data:`_NEAR_SLACK`) of the segment are tested, by the same arithmetic on the same
-    numbers as the dense frame; every other entry is False, as there.
+    numbers as the dense frame; every other entry is False, as there. A small batch is
+    computed densely (the pairs' bookkeeping costs more than it saves).
     """
     env = world.environment
     b, n, m = poses.shape[0], world.object.n, env.m
+    if b < _DENSE_BELOW:
+        return _frame(world, poses, tol).masks
     centre, radius = _bounding_disk(world)
     c, s_ = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     cx = c * centre[0] - s_ * centre[1] + poses[:, 0]
@@ -283,16 +286,18 @@ def _masks(world: World, poses: FloatArray, tol: float) -> ContactMasks:
     ev = np.zeros((b, n, m), dtype=bool)
     ee = np.zeros((b, n, m), dtype=bool)
     if pb.size:
-        keep = np.unique(pb)
-        V, D, Nn = _placed(world, poses[keep])
-        at = np.searchsorted(keep, pb)
-        pr = _pair_tests(world, V[at], D[at], Nn[at], pj, (pb.size, 1, 1), tol)
+        V, D, Nn = _placed(world, poses)
+        pr = _pair_tests(world, V[pb], D[pb], Nn[pb], pj, (pb.size, 1, 1), tol)
         prev = (np.arange(n) - 1) % n
         ee[pb, :, pj] = pr.ee[:, :, 0]
         ve[pb, :, pj] = (pr.ve & ~pr.ee & ~pr.ee[:, prev])[:, :, 0]
         arrive = env.vertex_edges[:, 0]
-        ev[pb, :, pj] = pr.ev[:, :, 0] & ~ee[pb, :, pj] & ~ee[pb, :, arrive[pj]]
+        ev[pb, :, pj] = pr.ev[:, :, 0] & ~pr.ee[:, :, 0] & ~ee[pb, :, arrive[pj]]
     return ContactMasks(ve, ev, ee)
+
+
+#: Batches smaller than this are identified densely by :func:`_masks`.
+_DENSE_BELOW = 128
 
 
 def _as_poses(poses: Pose | ArrayLike) -> FloatArray:

@@ -290,6 +290,58 @@ def kept_contact_holds(world: World, contact: Contact, poses: FloatArray, tol: f
     raise ValueError("edge-edge contacts are kept through one of their vertex contacts")
 
 
+def _kept_params(world: World, contact: Contact) -> tuple[float, ...]:
+    """The numbers :func:`kept_contact_holds` tests a contact by: ``(kind, point x, y,
+    edge start x, y, edge vector x, y, edge length)``, kind 0 for vertex-edge (object
+    vertex, environment edge), 1 for edge-vertex (environment vertex, object edge)."""
+    if contact.kind is ContactKind.VERTEX_EDGE:
+        p = world.object.polygon.vertices[contact.obj]
+        a, b = world.environment.edges[contact.env]
+        kind = 0.0
+    elif contact.kind is ContactKind.EDGE_VERTEX:
+        p = world.environment.vertices[contact.env]
+        a, b = world.object.polygon.edges[contact.obj]
+        kind = 1.0
+    else:
+        raise ValueError("edge-edge contacts are kept through one of their vertex contacts")
+    d = b - a
+    return (kind, float(p[0]), float(p[1]), float(a[0]), float(a[1]), float(d[0]), float(d[1]), float(np.hypot(*d)))
+
+
+def _kept_hold_rows(world: World, kept: Sequence[Sequence[Contact]], sizes: Sequence[int], poses: FloatArray,
+                    tol: float = CONTACT_TOL) -> NDArray[np.bool_]:
+    """:func:`kept_contact_holds` of several motions' contacts in one computation: the
+    poses are ``sizes[i]`` consecutive rows per motion ``i``, whose contacts are
+    ``kept[i]``; a row is True when all its motion's contacts hold (the same numbers as
+    one call per contact)."""
+    P = np.asarray(poses, dtype=float).reshape(-1, 3)
+    out = np.ones(P.shape[0], dtype=bool)
+    starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    for q in range(max((len(k) for k in kept), default=0)):
+        sel = [i for i, k in enumerate(kept) if len(k) > q and sizes[i]]
+        if not sel:
+            continue
+        rows = np.concatenate([np.arange(starts[i], starts[i + 1]) for i in sel])
+        par = np.repeat(np.array([_kept_params(world, kept[i][q]) for i in sel]), [sizes[i] for i in sel], axis=0)
+        Q = P[rows]
+        c, s = np.cos(Q[:, 2]), np.sin(Q[:, 2])
+        kind, p0, p1, a0, a1, d0, d1, L = par.T
+        ve = kind == 0.0
+        u = np.empty(rows.size)
+        # vertex-edge: the object vertex, placed, projected on the environment edge
+        wx = c[ve] * p0[ve] - s[ve] * p1[ve] + Q[ve, 0]
+        wy = s[ve] * p0[ve] + c[ve] * p1[ve] + Q[ve, 1]
+        u[ve] = ((wx - a0[ve]) * d0[ve] + (wy - a1[ve]) * d1[ve]) / L[ve]
+        # edge-vertex: the environment vertex, in the object frame, projected on the object edge
+        ev = ~ve
+        dx, dy = p0[ev] - Q[ev, 0], p1[ev] - Q[ev, 1]
+        qx = c[ev] * dx + s[ev] * dy
+        qy = -s[ev] * dx + c[ev] * dy
+        u[ev] = ((qx - a0[ev]) * d0[ev] + (qy - a1[ev]) * d1[ev]) / L[ev]
+        out[rows] &= (u >= -tol) & (u <= L + tol)
+    return out
+
+
 def _last_true(pred: Callable[[FloatArray], NDArray[np.bool_]], lo: float, hi: float, bits: int,
                width: int = 64) -> float:
     """Largest x in [lo, hi] with ``pred(x)`` true, for a predicate true at ``lo``, false
@@ -372,22 +424,17 @@ def sweep_many(
     def good(which: Sequence[int], poses: Sequence[FloatArray]) -> list[NDArray[np.bool_]]:
         """Whether each pose of ``poses[i]`` (motion ``which[i]``) is finite, keeps the
         motion's contacts and does not overlap (one overlap call for all)."""
-        oks, todo = [], []
-        for k, p in zip(which, poses):
-            ok = np.all(np.isfinite(p), axis=1)
-            safe = np.where(np.isfinite(p), p, 0.0)
-            for c in motions[k].kept:
-                ok &= kept_contact_holds(world, c, safe)
-            oks.append(ok)
-            todo.append(np.flatnonzero(ok))
-        sizes = [idx.size for idx in todo]
-        if sum(sizes):
-            hit = overlap(world, np.concatenate([p[idx] for p, idx in zip(poses, todo)]))
-            at = 0
-            for ok, idx, n in zip(oks, todo, sizes):
-                ok[idx] = ~hit[at:at + n]
-                at += n
-        return oks
+        if not poses:
+            return []
+        sizes = [p.shape[0] for p in poses]
+        every = np.concatenate(poses)
+        finite = np.isfinite(every)
+        ok = np.all(finite, axis=1)
+        ok &= _kept_hold_rows(world, [motions[k].kept for k in which], sizes, np.where(finite, every, 0.0))
+        todo = np.flatnonzero(ok)
+        if todo.size:
+            ok[todo] = ~overlap(world, every[todo])
+        return np.split(ok, np.cumsum(sizes)[:-1])
 
     # Walk in chunks that double, stopping at the first bad sample: most sweeps end (a
     # new contact, a kept contact lost) long before s_max, and a two-contact motion's
