@@ -828,29 +828,42 @@ def _equations(world: World, tg: _Targets, theta: FloatArray,
 
 
 def _within(world: World, tg: _Targets, c: IntArray, poses: FloatArray, tol: float) -> BoolArray:
-    """Whether target contact ``c[b]`` lies within its finite features at ``poses[b]``."""
+    """Whether target contact ``c[b]`` lies within its finite features at ``poses[b]``.
+
+    Each kind is tested on its own rows (every number is elementwise, so a row's answer
+    does not depend on the others)."""
     poly = world.object.polygon
     env = world.environment
-    kind, oi, ej = tg.kind[c], tg.obj[c], tg.env[c]
-    cth, sth = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    kind = tg.kind[c]
+    out = np.zeros(c.size, dtype=bool)
+    for k in (_VE, _EE, _EV):
+        rows = np.flatnonzero(kind == k)
+        if not rows.size:
+            continue
+        cr, p = c[rows], poses[rows]
+        oi, ej = tg.obj[cr], tg.env[cr]
+        cth, sth = np.cos(p[:, 2]), np.sin(p[:, 2])
 
-    def place(v: FloatArray) -> FloatArray:
-        return np.stack([cth * v[:, 0] - sth * v[:, 1] + poses[:, 0], sth * v[:, 0] + cth * v[:, 1] + poses[:, 1]], -1)
+        def place(v: FloatArray) -> FloatArray:
+            return np.stack([cth * v[:, 0] - sth * v[:, 1] + p[:, 0], sth * v[:, 0] + cth * v[:, 1] + p[:, 1]], -1)
 
-    e_edge = np.where(kind == _EV, 0, ej)
-    a_e, t_e = env.vertices[e_edge], env.edge_directions[e_edge]
-    P = place(poly.vertices[oi])
-    Q = place(poly.vertices[(oi + 1) % len(poly)])
-    uP = np.einsum("bk,bk->b", P - a_e, t_e)
-    uQ = np.einsum("bk,bk->b", Q - a_e, t_e)
-    lo, hi = tg.lo[c], tg.hi[c]
-    ok_ve = (uP >= lo - tol) & (uP <= hi + tol)
-    ok_ee = np.minimum(np.maximum(uP, uQ), hi) - np.maximum(np.minimum(uP, uQ), lo) > tol
-    w = env.vertices[np.where(kind == _EV, ej, 0)]
-    L = poly.edge_lengths[oi]
-    sv = np.einsum("bk,bk->b", w - P, (Q - P)) / L
-    ok_ev = (sv >= -tol) & (sv <= L + tol)
-    return np.where(kind == _VE, ok_ve, np.where(kind == _EE, ok_ee, ok_ev))
+        P = place(poly.vertices[oi])
+        if k == _EV:
+            Q = place(poly.vertices[(oi + 1) % len(poly)])
+            L = poly.edge_lengths[oi]
+            sv = np.einsum("bk,bk->b", env.vertices[ej] - P, (Q - P)) / L
+            out[rows] = (sv >= -tol) & (sv <= L + tol)
+            continue
+        a_e, t_e = env.vertices[ej], env.edge_directions[ej]
+        uP = np.einsum("bk,bk->b", P - a_e, t_e)
+        lo, hi = tg.lo[cr], tg.hi[cr]
+        if k == _VE:
+            out[rows] = (uP >= lo - tol) & (uP <= hi + tol)
+            continue
+        Q = place(poly.vertices[(oi + 1) % len(poly)])
+        uQ = np.einsum("bk,bk->b", Q - a_e, t_e)
+        out[rows] = np.minimum(np.maximum(uP, uQ), hi) - np.maximum(np.minimum(uP, uQ), lo) > tol
+    return out
 
 
 def _farthest_points(x: FloatArray, k: int) -> IntArray:
@@ -974,8 +987,8 @@ def enumerate_contact_states(
     poses = np.concatenate(cand_p)
     # ---- target contacts within their finite features -----------------------------------
     ok = _within(world, tg, cc1, poses, tol)
-    has2 = cc2 >= 0
-    ok[has2] &= _within(world, tg, cc2[has2], poses[has2], tol)
+    both = np.flatnonzero(ok & (cc2 >= 0))  # the second contact, where the first holds
+    ok[both] = _within(world, tg, cc2[both], poses[both], tol)
     poses = poses[ok]
     n_candidates = int(ok.size)
     # ---- cheap penetration pre-filter: no object vertex deep inside a solid ------------
