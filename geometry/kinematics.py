@@ -197,6 +197,74 @@ def two_contact(world: World, start: Pose, kept: tuple[Contact, Contact], sense:
     return m
 
 
+def _poses_many(motions: Sequence[Motion], params: Sequence[Sequence[float] | FloatArray]) -> list[FloatArray]:
+    """``[m.poses(s) for m, s in zip(motions, params)]``, each kind of motion in one
+    vectorised computation: :meth:`Motion.poses`' formulas with each row's motion's
+    numbers (elementwise, so the same numbers)."""
+    s_each = [np.atleast_1d(np.asarray(x, dtype=float)).ravel() for x in params]
+    sizes = [x.size for x in s_each]
+    if not s_each:
+        return []
+    s = np.concatenate(s_each)
+    out = np.empty((s.size, 3))
+    owner = np.repeat(np.arange(len(motions)), sizes)
+    code = {MotionKind.TRANSLATE: 0, MotionKind.ROTATE: 1, MotionKind.TWO_CONTACT: 2}
+    kind = np.array([code[m.kind] for m in motions], dtype=np.int64)[owner]
+    x0 = np.array([m.start.x for m in motions], dtype=float)
+    y0 = np.array([m.start.y for m in motions], dtype=float)
+    t0 = np.array([m.start.theta for m in motions], dtype=float)
+    sense = np.array([m.sense for m in motions], dtype=float)
+    rows = np.flatnonzero(kind == 0)
+    if rows.size:
+        o, sr = owner[rows], s[rows]
+        d = np.array([m.direction if m.kind is MotionKind.TRANSLATE else (0.0, 0.0) for m in motions], dtype=float)
+        out[rows, 0] = x0[o] + sr * d[o, 0]
+        out[rows, 1] = y0[o] + sr * d[o, 1]
+        out[rows, 2] = t0[o]
+    rows = np.flatnonzero(kind == 1)
+    if rows.size:
+        o, sr = owner[rows], s[rows]
+        pv = np.array([m.pivot if m.kind is MotionKind.ROTATE else (0.0, 0.0) for m in motions], dtype=float)
+        px, py = pv[o, 0], pv[o, 1]
+        a = sense[o] * sr
+        c, sn = np.cos(a), np.sin(a)
+        out[rows, 0] = px + c * (x0[o] - px) - sn * (y0[o] - py)
+        out[rows, 1] = py + sn * (x0[o] - px) + c * (y0[o] - py)
+        out[rows, 2] = wrap_angle(t0[o] + a)
+    rows = np.flatnonzero(kind == 2)
+    if rows.size:
+        o, sr = owner[rows], s[rows]
+        lines = np.array([m.lines if m.kind is MotionKind.TWO_CONTACT else ((0.0,) * 6,) * 2 for m in motions],
+                         dtype=float)  # (motions, 2, 6)
+        theta = t0[o] + sense[o] * sr
+        out[rows, 2] = wrap_angle(theta)
+        out[rows, :2] = _solve_line_rows(lines[o], theta)
+    return np.split(out, np.cumsum(sizes)[:-1])
+
+
+def _solve_line_rows(lines: FloatArray, theta: FloatArray) -> FloatArray:
+    """:func:`_solve_two_lines` with each row's own two lines, (n, 2, 6)."""
+    c, s = np.cos(theta), np.sin(theta)
+    A = np.empty(theta.shape + (2, 2))
+    b = np.empty(theta.shape + (2,))
+    for row in range(2):
+        kind, u0, u1, w0, w1, k = lines[:, row].T
+        edge = kind == 0.0
+        rx = c * u0 - s * u1  # R p (vertex-edge) or R m (edge-vertex)
+        ry = s * u0 + c * u1
+        A[:, row, 0] = np.where(edge, w0, rx)
+        A[:, row, 1] = np.where(edge, w1, ry)
+        b[:, row] = np.where(edge, k - (w0 * rx + w1 * ry), rx * w0 + ry * w1 - k)
+    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+    ok = np.abs(det) > 1e-9
+    safe = np.where(ok, det, 1.0)
+    tx = (b[..., 0] * A[..., 1, 1] - b[..., 1] * A[..., 0, 1]) / safe
+    ty = (A[..., 0, 0] * b[..., 1] - A[..., 1, 0] * b[..., 0]) / safe
+    out = np.stack([tx, ty], axis=-1)
+    out[~ok] = np.nan
+    return out
+
+
 # --------------------------------------------------------------------------- sweeps
 
 
@@ -419,7 +487,7 @@ def sweep_many(
         return []
     overlap = overlap_fn or _default_overlap
     motions = [m for m, _ in jobs]
-    grids = [_Grid(world, m, 0.0, s_max, step_mm) for m, s_max in jobs]
+    grids = _grids(world, [(m, 0.0, s_max) for m, s_max in jobs], step_mm)
 
     def good(which: Sequence[int], poses: Sequence[FloatArray]) -> list[NDArray[np.bool_]]:
         """Whether each pose of ``poses[i]`` (motion ``which[i]``) is finite, keeps the
@@ -476,7 +544,7 @@ def sweep_many(
         else:
             end[k] = SweepEnd.BLOCKED
     last = _last_true_many(
-        lambda xs: good(refine, [motions[k].poses(x) for k, x in zip(refine, xs)]),
+        lambda xs: good(refine, _poses_many([motions[k] for k in refine], xs)),
         [float(grids[k].s[first_bad[k] - 1]) for k in refine],  # type: ignore[operator]
         [float(grids[k].s[first_bad[k]]) for k in refine], refine_bits)  # type: ignore[index]
     last_of = dict(zip(refine, last))
@@ -525,7 +593,7 @@ def sweep_many(
             start_i = i
 
     def same(xs: list[FloatArray]) -> list[NDArray[np.bool_]]:
-        placed = [motions[k].poses(x) for (k, _, _), x in zip(changes, xs)]
+        placed = _poses_many([motions[k] for k, _, _ in changes], xs)
         got = _state_rows(world, np.concatenate(placed), tol)[0] if placed else rows[:0]
         out, at = [], 0
         for (k, _, start_i), p in zip(changes, placed):
@@ -589,6 +657,38 @@ def _grid_poses(world: World, motion: Motion, s0: float, s1: float, step_mm: flo
     return _Grid(world, motion, s0, s1, step_mm).whole()
 
 
+def _uniform_grids(world: World, jobs: Sequence[tuple[Motion, float, float]], step_mm: float
+                   ) -> list[tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]]:
+    """The uniform grid of each ``(motion, s0, s1)`` (sized by the motion's vertex speed,
+    see :func:`_grid`): its values, poses, the object's placed vertices (x and y, (n+1, N)
+    each) and the longest vertex step of each interval; the poses and vertices of all
+    the grids in one computation (elementwise: the numbers of one grid at a time)."""
+    values = []
+    for motion, s0, s1 in jobs:
+        speed = max(motion.vertex_speed(world), EPS)
+        if motion.kind is MotionKind.TWO_CONTACT:
+            speed = min(speed, TWO_CONTACT_SPEED_CAP * world.object.polygon.radius)
+        n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))  # uniform intervals
+        values.append(np.linspace(s0, s1, n + 1))
+    poses = _poses_many([m for m, _, _ in jobs], values)
+    if not poses:
+        return []
+    wx, wy = _placed_vertices(world, np.concatenate(poses))
+    step = np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)  # consecutive samples
+    out, at = [], 0
+    for s, p in zip(values, poses):
+        k = s.size
+        out.append((s, p, wx[at:at + k], wy[at:at + k], step[at:at + k - 1]))
+        at += k
+    return out
+
+
+def _grids(world: World, jobs: Sequence[tuple[Motion, float, float]], step_mm: float) -> list["_Grid"]:
+    """A :class:`_Grid` of each ``(motion, s0, s1)``, their uniform grids computed together."""
+    return [_Grid(world, m, s0, s1, step_mm, uniform)
+            for (m, s0, s1), uniform in zip(jobs, _uniform_grids(world, jobs, step_mm))]
+
+
 class _Grid:
     """:func:`_grid`'s values and poses, computed as far as a sweep walks them.
 
@@ -609,16 +709,16 @@ class _Grid:
     too. When that bound does not hold, the whole grid is computed.
     """
 
-    def __init__(self, world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> None:
-        speed = max(motion.vertex_speed(world), EPS)
-        if motion.kind is MotionKind.TWO_CONTACT:
-            speed = min(speed, TWO_CONTACT_SPEED_CAP * world.object.polygon.radius)
-        self.n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))  # uniform intervals
+    def __init__(self, world: World, motion: Motion, s0: float, s1: float, step_mm: float,
+                 uniform: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray] | None = None) -> None:
+        """``uniform``: the uniform grid's values, poses, placed vertices (x and y) and
+        the longest vertex step of each interval, as :func:`_grids` computes them for
+        several grids at once (computed here when ``None``)."""
         self.world, self.motion, self.step = world, motion, step_mm
-        self.s0 = np.linspace(s0, s1, self.n + 1)
-        self.p0 = motion.poses(self.s0)
-        self.wx, self.wy = _placed_vertices(world, self.p0)
-        self.d0 = np.max(np.hypot(np.diff(self.wx, axis=0), np.diff(self.wy, axis=0)), axis=1)  # consecutive samples
+        if uniform is None:
+            uniform = _uniform_grids(world, [(motion, s0, s1)], step_mm)[0]
+        self.s0, self.p0, self.wx, self.wy, self.d0 = uniform
+        self.n = self.s0.size - 1  # uniform intervals
         self.m = 0  # uniform intervals halved so far
         self.s, self.p = self.s0[:1], self.p0[:1]
 
@@ -650,9 +750,11 @@ class _Grid:
         poses; ``None`` when that cannot be told without the rest."""
         outside = self.n - m  # samples after them
         s, p, wx, wy, d = self.s0[:m + 1], self.p0[:m + 1], self.wx[:m + 1], self.wy[:m + 1], self.d0[:m]
+        k = np.flatnonzero(d > self.step)
+        if not k.size:  # nothing to halve (the rounds below would stop at once)
+            return s, p
         undefined = np.flatnonzero(~np.isfinite(d))
         first_undefined = float(s[undefined[0]]) if undefined.size else math.inf  # its start
-        k = np.flatnonzero(d > self.step)
         # the intervals still too long: their ends and the object's vertices there
         a, b = s[k], s[k + 1]
         ax, ay, bx, by = wx[k], wy[k], wx[k + 1], wy[k + 1]
