@@ -430,7 +430,7 @@ def _last_true_many(pred: Callable[[list[FloatArray]], list[NDArray[np.bool_]]],
     for _ in range(rounds):
         if not lo:
             break
-        xs = [np.linspace(a, b, width + 2)[1:-1] for a, b in zip(lo, hi)]
+        xs = list(_linspaces(lo, hi, width + 2)[:, 1:-1])
         for k, (x, ok) in enumerate(zip(xs, pred(xs))):
             bad = np.flatnonzero(~ok)
             if bad.size == 0:
@@ -440,6 +440,20 @@ def _last_true_many(pred: Callable[[list[FloatArray]], list[NDArray[np.bool_]]],
                 hi[k] = float(x[i])
                 lo[k] = float(x[i - 1]) if i > 0 else lo[k]
     return lo
+
+
+def _linspaces(lo: Sequence[float], hi: Sequence[float], num: int) -> FloatArray:
+    """``np.linspace(lo[k], hi[k], num)`` of each interval, as the rows of one array:
+    numpy's arithmetic (``i * step + start``, the end set to ``stop``) on all rows at once;
+    one interval at a time when some step is zero (numpy then computes differently)."""
+    a, b = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    step = (b - a) / (num - 1) if num > 1 else np.zeros(a.size)
+    if np.any(step == 0):
+        return np.array([np.linspace(x, y, num) for x, y in zip(a, b)]).reshape(a.size, num)
+    out = np.arange(0, num, dtype=float)[None, :] * step[:, None]
+    out += a[:, None]
+    out[:, -1] = b
+    return out
 
 
 def sweep(

@@ -283,3 +283,17 @@ def test_poses_of_several_motions_are_each_motions_poses(slot: World) -> None:
         np.testing.assert_array_equal(p, m.poses(x))
     assert any(np.isnan(p).any() for p in got)
     assert K._poses_many([], []) == []
+
+
+def test_linspaces_are_numpy_linspace_of_each_interval() -> None:
+    """kinematics._linspaces (the multisection's points of every interval at once): bit
+    for bit np.linspace of each, zero-length and denormal intervals included."""
+    rng = np.random.default_rng(9)
+    lo = rng.uniform(-5, 5, 50) * 10.0 ** rng.integers(-8, 4, 50)
+    hi = lo + rng.uniform(0, 3, 50) * 10.0 ** rng.integers(-12, 2, 50)
+    for num in (66, 2, 7, 1):
+        got = K._linspaces(lo, hi, num)
+        assert np.array_equal(got, np.array([np.linspace(a, b, num) for a, b in zip(lo, hi)]))
+    lo2, hi2 = np.array([0.0, 1.0, 5e-324]), np.array([1.0, 1.0, 1e-323])  # a zero and a denormal step
+    assert np.array_equal(K._linspaces(lo2, hi2, 66), np.array([np.linspace(a, b, 66) for a, b in zip(lo2, hi2)]))
+    assert K._linspaces([], [], 66).shape == (0, 66)
