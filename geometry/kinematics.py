@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import enum
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -588,7 +589,7 @@ def sweep_many(
     changed = np.zeros(rows.shape[0], dtype=bool)  # row i differs from row i - 1 of its sweep
     changed[1:] = np.any(rows[1:] != rows[:-1], axis=1)
     changed[offsets[:-1]] = False
-    states: dict[bytes, ContactState] = {}
+    states = _STATES.setdefault(world, {})  # a packed row names one state of the world
 
     def state(i: int) -> ContactState:
         key = rows[i].tobytes()
@@ -636,6 +637,10 @@ def sweep_many(
         out.append(Sweep(motions[k], tuple(pieces), end[k]))
     return out
 
+
+#: The contact state of each packed row of principal-contact masks met so far, per world
+#: (:func:`_state_rows`: the row is the masks, so it names the state).
+_STATES: "weakref.WeakKeyDictionary[World, dict[bytes, ContactState]]" = weakref.WeakKeyDictionary()
 
 #: A two-contact motion's grid starts at most this fast (object radii of vertex motion
 #: per radian) and is subdivided where it moves faster: its speed bound is a finite
