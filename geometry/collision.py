@@ -98,11 +98,15 @@ class ErodedShape:
         The erosion as one prepared shapely geometry (possibly empty).
     tol : float
         The erosion distance ``t`` (mm).
+    convex : tuple of bool
+        Whether each part is strictly convex (:func:`_strictly_convex`: its overlaps are
+        decided by exact orientation signs first).
     """
 
     parts: tuple[FloatArray, ...]
     geometry: shapely.Geometry
     tol: float
+    convex: tuple[bool, ...] = ()
 
     @property
     def is_empty(self) -> bool:
@@ -133,7 +137,7 @@ def _erode(geom: shapely.Geometry, tol: float) -> ErodedShape:
             parts.append(coords)
     out = shapely.MultiPolygon([shapely.Polygon(c) for c in parts]) if parts else shapely.Polygon()
     shapely.prepare(out)
-    return ErodedShape(tuple(parts), out, tol)
+    return ErodedShape(tuple(parts), out, tol, tuple(_strictly_convex(c) for c in parts))
 
 
 def eroded_polygon(polygon: Polygon, tol: float) -> ErodedShape:
@@ -321,10 +325,11 @@ def _convex_vs_target(placed: FloatArray, target: ErodedShape) -> tuple[BoolArra
     return hit, hit | ~unsure
 
 
-def _parts_vs_geometry(parts: tuple[FloatArray, ...], poses: FloatArray,
+def _parts_vs_geometry(parts: tuple[FloatArray, ...] | ErodedShape, poses: FloatArray,
                        target: ErodedShape, offsets: FloatArray | None = None) -> BoolArray:
     """Whether any eroded part, placed at each pose, intersects the eroded ``target``.
 
+    ``parts``: the parts, or the eroded body (its parts, whose convexity it knows).
     ``offsets`` (B, 2) shifts the parts in their own frame before the pose (finger opening).
 
     Exact pre-filters decide most poses with point predicates: a part whose bounding
@@ -333,11 +338,15 @@ def _parts_vs_geometry(parts: tuple[FloatArray, ...], poses: FloatArray,
     orientation signs (:func:`_convex_vs_target`) where they are certain; only the rest
     are built as shapely polygons.
     """
+    if isinstance(parts, ErodedShape):
+        parts, convex = parts.parts, parts.convex
+    else:
+        convex = tuple(_strictly_convex(p) for p in parts)
     b = poses.shape[0]
     hit = np.zeros(b, dtype=bool)
     if b == 0 or not parts or target.is_empty:
         return hit
-    for part in parts:
+    for part, part_convex in zip(parts, convex):
         centre = 0.5 * (part.min(axis=0) + part.max(axis=0))
         radius = float(np.linalg.norm(part - centre, axis=1).max())
         local_c = np.broadcast_to(centre if offsets is None else centre + offsets, (b, 2))
@@ -352,7 +361,7 @@ def _parts_vs_geometry(parts: tuple[FloatArray, ...], poses: FloatArray,
         deep = shapely.intersects_xy(target.geometry, flat[:, 0], flat[:, 1]).reshape(near.size, -1).any(axis=1)
         hit[near[deep]] = True
         rest = np.flatnonzero(~deep)
-        if rest.size and _strictly_convex(part):
+        if rest.size and part_convex:
             got, decided = _convex_vs_target(world[rest], target)
             hit[near[rest[got]]] = True
             rest = rest[~decided]
@@ -456,15 +465,15 @@ def _fingers_vs(gripper: Gripper, poses: FloatArray, w: FloatArray, target: Erod
     out = np.zeros((b, 2), dtype=bool)
     off1, off2 = _finger_offsets(w)
     t = target.tol
-    out[:, 0] = _parts_vs_geometry(eroded_polygon(gripper.mirrored_finger, t).parts, poses, target, off1)
-    out[:, 1] = _parts_vs_geometry(eroded_polygon(gripper.finger, t).parts, poses, target, off2)
+    out[:, 0] = _parts_vs_geometry(eroded_polygon(gripper.mirrored_finger, t), poses, target, off1)
+    out[:, 1] = _parts_vs_geometry(eroded_polygon(gripper.finger, t), poses, target, off2)
     return out
 
 
 def _palm_vs(gripper: Gripper, poses: FloatArray, target: ErodedShape) -> BoolArray:
     if not isinstance(gripper, PolylineGripper) or gripper.palm is None:
         return np.zeros(poses.shape[0], dtype=bool)
-    return _parts_vs_geometry(eroded_polygon(gripper.palm, target.tol).parts, poses, target)
+    return _parts_vs_geometry(eroded_polygon(gripper.palm, target.tol), poses, target)
 
 
 # --------------------------------------------------------------------------------------
@@ -492,7 +501,7 @@ def polygon_env_overlap(env: Environment, polygon: Polygon, poses: ArrayLike,
     ndarray of bool, shape (B,)
     """
     t = _check_tol(tol)
-    return _parts_vs_geometry(eroded_polygon(polygon, t).parts, _poses(poses), eroded_environment(env, t))
+    return _parts_vs_geometry(eroded_polygon(polygon, t), _poses(poses), eroded_environment(env, t))
 
 
 def object_env_overlap(world: World, object_poses: ArrayLike, tol: float = PENETRATION_TOL) -> BoolArray:
@@ -611,7 +620,7 @@ def fingers_overlap(gripper: Gripper, widths: ArrayLike, tol: float = PENETRATIO
     e1 = eroded_polygon(gripper.mirrored_finger, t)
     # Finger 1 expressed in finger 2's frame: shifted by off1 - off2 = (-w, 0).
     ident = np.zeros((w.shape[0], 3))
-    return _parts_vs_geometry(e1.parts, ident, e2, off1 - off2)
+    return _parts_vs_geometry(e1, ident, e2, off1 - off2)
 
 
 def overlaps(a: ArrayLike | shapely.Geometry, b: ArrayLike | shapely.Geometry,

@@ -371,8 +371,10 @@ def test_convex_parts_are_decided_as_geos_decides() -> None:
     target = eroded_environment(Environment((Solid("slot", make_polygon(
         [[300, 0], [0, 0], [0, 75], [-200, 75], [-200, -50], [500, -50], [500, 75], [300, 75]])),
         Solid("peg", make_polygon([[600, 100], [610, 100], [610, 110], [600, 110]])))), 1e-4)
-    part = eroded_polygon(make_polygon([[0, 0], [70, 0], [70, 150], [0, 150]]), 1e-4).parts[0]
-    assert _strictly_convex(part)
+    block = eroded_polygon(make_polygon([[0, 0], [70, 0], [70, 150], [0, 150]]), 1e-4)
+    part = block.parts[0]
+    assert _strictly_convex(part) and block.convex == (True,)
+    assert eroded_polygon(make_polygon([[0, 0], [20, 0], [20, 20], [10, 20], [10, 10], [0, 10]]), 0.1).convex == (False,)
     assert not _strictly_convex(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [2.0, 1.0]]))
     assert not _strictly_convex(np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 0.5], [2.0, 2.0], [0.0, 2.0]]))
     rng = np.random.default_rng(6)
