@@ -27,7 +27,11 @@ How the rule is evaluated quickly:
   (``shapely.intersects_xy``) against the target grown by a distance ``d`` as two polygons,
   one inside the true offset region and one outside it, decides "within ``d``" for
   points not between them; a part whose bounding-disk centre is farther than its radius
-  misses, a part with a vertex inside the target hits. Only the rest are tested as above.
+  misses, a part with a vertex inside the target hits. A strictly convex part is then
+  decided by exact orientation signs (Shewchuk's floating-point filter) of its edges
+  against the target's boundary edges near it: a certain crossing or a target vertex
+  certainly inside it hits, all certainly apart misses. Only the rest (near-degenerate
+  signs, concave parts) are tested as above.
 
 Rounded corners of an erosion (at concave corners of a polygon) are approximated by
 shapely with 8 segments per quarter circle; the error is below ``0.005 t``.
@@ -44,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from shapely.geometry.polygon import orient
 
 from geometry.poses import BoolArray, transform_points
@@ -94,11 +98,15 @@ class ErodedShape:
         The erosion as one prepared shapely geometry (possibly empty).
     tol : float
         The erosion distance ``t`` (mm).
+    convex : tuple of bool
+        Whether each part is strictly convex (:func:`_strictly_convex`: its overlaps are
+        decided by exact orientation signs first).
     """
 
     parts: tuple[FloatArray, ...]
     geometry: shapely.Geometry
     tol: float
+    convex: tuple[bool, ...] = ()
 
     @property
     def is_empty(self) -> bool:
@@ -129,7 +137,7 @@ def _erode(geom: shapely.Geometry, tol: float) -> ErodedShape:
             parts.append(coords)
     out = shapely.MultiPolygon([shapely.Polygon(c) for c in parts]) if parts else shapely.Polygon()
     shapely.prepare(out)
-    return ErodedShape(tuple(parts), out, tol)
+    return ErodedShape(tuple(parts), out, tol, tuple(_strictly_convex(c) for c in parts))
 
 
 def eroded_polygon(polygon: Polygon, tol: float) -> ErodedShape:
@@ -232,21 +240,113 @@ _GROWN_CACHE: "weakref.WeakKeyDictionary[ErodedShape, dict[float, tuple[shapely.
     weakref.WeakKeyDictionary()
 
 
-def _parts_vs_geometry(parts: tuple[FloatArray, ...], poses: FloatArray,
+# Exact orientation signs without GEOS: Shewchuk's filter for orient2d (a sign is certain
+# when the determinant exceeds 3.33e-16 times the sum of its two products' magnitudes;
+# 1e-15 is taken), the rest left to GEOS, whose predicates are exact.
+_ORIENT_ERR = 1e-15
+_ORIENT_FLOOR = 1e-250  # below it, products may have lost digits to underflow
+
+
+def _orient_sign(ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray,
+                 cx: FloatArray, cy: FloatArray) -> NDArray[np.int8]:
+    """Sign of ``orient2d(a, b, c)`` (+1: c left of the line a -> b, -1: right) where
+    the floating-point determinant certainly has the exact sign; 0 where it may not
+    (c on or very near the line)."""
+    left = (ax - cx) * (by - cy)
+    right = (ay - cy) * (bx - cx)
+    det = left - right
+    bound = _ORIENT_ERR * (np.abs(left) + np.abs(right)) + _ORIENT_FLOOR
+    return (det > bound).astype(np.int8) - (det < -bound).astype(np.int8)
+
+
+def _target_edges(target: ErodedShape) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The boundary edges of an eroded target (every part's exterior, closed): starts,
+    ends, and the lower and upper corners of each edge's bounding box, (K, 2) each
+    (cached)."""
+    hit = _EDGES_CACHE.get(target)
+    if hit is None:
+        a = np.concatenate(target.parts) if target.parts else np.zeros((0, 2))
+        b = np.concatenate([np.roll(p, -1, axis=0) for p in target.parts]) if target.parts else a
+        hit = _EDGES_CACHE[target] = (a, b, np.minimum(a, b), np.maximum(a, b))
+    return hit
+
+
+_EDGES_CACHE: "weakref.WeakKeyDictionary[ErodedShape, tuple[FloatArray, FloatArray, FloatArray, FloatArray]]" = \
+    weakref.WeakKeyDictionary()
+
+#: A part is tested without GEOS when it turns left at every vertex by at least this
+#: (cross product of the unit edge directions): strictly convex beyond any rounding.
+_CONVEX_TURN = 1e-6
+
+
+def _strictly_convex(part: FloatArray) -> bool:
+    """Whether the counter-clockwise ``part`` is strictly convex (:data:`_CONVEX_TURN`)."""
+    d = np.roll(part, -1, axis=0) - part
+    length = np.hypot(d[:, 0], d[:, 1])
+    if part.shape[0] < 3 or np.any(length <= 0.0):
+        return False
+    d = d / length[:, None]
+    nxt = np.roll(d, -1, axis=0)
+    return bool(np.all(d[:, 0] * nxt[:, 1] - d[:, 1] * nxt[:, 0] >= _CONVEX_TURN))
+
+
+def _convex_vs_target(placed: FloatArray, target: ErodedShape) -> tuple[BoolArray, BoolArray]:
+    """``shapely.intersects(target, polygon)`` for strictly convex polygons (B, V, 2)
+    (counter-clockwise) none of whose vertices is in the target, where exact
+    orientation signs decide it: ``(hit, decided)``, each (B,).
+
+    With every vertex of the polygon outside the target, they intersect iff an edge of
+    the polygon meets an edge of the target's boundary or a vertex of the target lies
+    in the polygon; both are read from the signs of :func:`_orient_sign`, for the
+    target edges whose bounding box meets the polygon's (the others can do neither). A
+    polygon is decided when a certain crossing or a target vertex certainly inside is
+    found (hit), or when every such edge is certainly apart and its start vertex
+    certainly outside (miss); the rest (near-degenerate signs) are not decided.
+    """
+    b = placed.shape[0]
+    starts, ends, lo, hi = _target_edges(target)
+    plo, phi = placed.min(axis=1), placed.max(axis=1)
+    r, k = np.nonzero((lo[None, :, 0] <= phi[:, None, 0]) & (hi[None, :, 0] >= plo[:, None, 0])
+                      & (lo[None, :, 1] <= phi[:, None, 1]) & (hi[None, :, 1] >= plo[:, None, 1]))
+    A = placed[r]  # (Q, V, 2): the polygon's edges A_i -> A_(i+1)
+    Bn = np.roll(A, -1, axis=1)
+    c, d = starts[k][:, None, :], ends[k][:, None, :]  # (Q, 1, 2): the target's edge c -> d
+    o_c = _orient_sign(A[..., 0], A[..., 1], Bn[..., 0], Bn[..., 1], c[..., 0], c[..., 1])  # (Q, V)
+    o_d = _orient_sign(A[..., 0], A[..., 1], Bn[..., 0], Bn[..., 1], d[..., 0], d[..., 1])
+    o_a = _orient_sign(c[..., 0], c[..., 1], d[..., 0], d[..., 1], A[..., 0], A[..., 1])
+    o_b = np.roll(o_a, -1, axis=1)  # the same determinant at A_(i+1)
+    cd, ab = o_c * o_d, o_a * o_b  # > 0: both certain, same side; < 0: both certain, opposite
+    pair_hit = np.any((cd < 0) & (ab < 0), axis=1) | np.all(o_c > 0, axis=1)
+    pair_miss = np.all((cd > 0) | (ab > 0), axis=1) & np.any(o_c < 0, axis=1)
+    hit = np.zeros(b, dtype=bool)
+    hit[r[pair_hit]] = True
+    unsure = np.zeros(b, dtype=bool)
+    unsure[r[~pair_hit & ~pair_miss]] = True
+    return hit, hit | ~unsure
+
+
+def _parts_vs_geometry(parts: tuple[FloatArray, ...] | ErodedShape, poses: FloatArray,
                        target: ErodedShape, offsets: FloatArray | None = None) -> BoolArray:
     """Whether any eroded part, placed at each pose, intersects the eroded ``target``.
 
+    ``parts``: the parts, or the eroded body (its parts, whose convexity it knows).
     ``offsets`` (B, 2) shifts the parts in their own frame before the pose (finger opening).
 
     Exact pre-filters decide most poses with point predicates: a part whose bounding
     disk's centre is outside the target grown by the disk's radius misses it, a part with
-    a vertex inside the target hits it; only the rest are built as shapely polygons.
+    a vertex inside the target hits it; a strictly convex part is then decided by exact
+    orientation signs (:func:`_convex_vs_target`) where they are certain; only the rest
+    are built as shapely polygons.
     """
+    if isinstance(parts, ErodedShape):
+        parts, convex = parts.parts, parts.convex
+    else:
+        convex = tuple(_strictly_convex(p) for p in parts)
     b = poses.shape[0]
     hit = np.zeros(b, dtype=bool)
     if b == 0 or not parts or target.is_empty:
         return hit
-    for part in parts:
+    for part, part_convex in zip(parts, convex):
         centre = 0.5 * (part.min(axis=0) + part.max(axis=0))
         radius = float(np.linalg.norm(part - centre, axis=1).max())
         local_c = np.broadcast_to(centre if offsets is None else centre + offsets, (b, 2))
@@ -261,6 +361,10 @@ def _parts_vs_geometry(parts: tuple[FloatArray, ...], poses: FloatArray,
         deep = shapely.intersects_xy(target.geometry, flat[:, 0], flat[:, 1]).reshape(near.size, -1).any(axis=1)
         hit[near[deep]] = True
         rest = np.flatnonzero(~deep)
+        if rest.size and part_convex:
+            got, decided = _convex_vs_target(world[rest], target)
+            hit[near[rest[got]]] = True
+            rest = rest[~decided]
         if rest.size:
             hit[near[rest]] = shapely.intersects(target.geometry, shapely.polygons(world[rest]))
     return hit
@@ -361,15 +465,15 @@ def _fingers_vs(gripper: Gripper, poses: FloatArray, w: FloatArray, target: Erod
     out = np.zeros((b, 2), dtype=bool)
     off1, off2 = _finger_offsets(w)
     t = target.tol
-    out[:, 0] = _parts_vs_geometry(eroded_polygon(gripper.mirrored_finger, t).parts, poses, target, off1)
-    out[:, 1] = _parts_vs_geometry(eroded_polygon(gripper.finger, t).parts, poses, target, off2)
+    out[:, 0] = _parts_vs_geometry(eroded_polygon(gripper.mirrored_finger, t), poses, target, off1)
+    out[:, 1] = _parts_vs_geometry(eroded_polygon(gripper.finger, t), poses, target, off2)
     return out
 
 
 def _palm_vs(gripper: Gripper, poses: FloatArray, target: ErodedShape) -> BoolArray:
     if not isinstance(gripper, PolylineGripper) or gripper.palm is None:
         return np.zeros(poses.shape[0], dtype=bool)
-    return _parts_vs_geometry(eroded_polygon(gripper.palm, target.tol).parts, poses, target)
+    return _parts_vs_geometry(eroded_polygon(gripper.palm, target.tol), poses, target)
 
 
 # --------------------------------------------------------------------------------------
@@ -397,7 +501,7 @@ def polygon_env_overlap(env: Environment, polygon: Polygon, poses: ArrayLike,
     ndarray of bool, shape (B,)
     """
     t = _check_tol(tol)
-    return _parts_vs_geometry(eroded_polygon(polygon, t).parts, _poses(poses), eroded_environment(env, t))
+    return _parts_vs_geometry(eroded_polygon(polygon, t), _poses(poses), eroded_environment(env, t))
 
 
 def object_env_overlap(world: World, object_poses: ArrayLike, tol: float = PENETRATION_TOL) -> BoolArray:
@@ -516,7 +620,7 @@ def fingers_overlap(gripper: Gripper, widths: ArrayLike, tol: float = PENETRATIO
     e1 = eroded_polygon(gripper.mirrored_finger, t)
     # Finger 1 expressed in finger 2's frame: shifted by off1 - off2 = (-w, 0).
     ident = np.zeros((w.shape[0], 3))
-    return _parts_vs_geometry(e1.parts, ident, e2, off1 - off2)
+    return _parts_vs_geometry(e1, ident, e2, off1 - off2)
 
 
 def overlaps(a: ArrayLike | shapely.Geometry, b: ArrayLike | shapely.Geometry,

@@ -135,55 +135,78 @@ def _rotate(theta: FloatArray, pts: FloatArray) -> FloatArray:
     return np.stack([c * pts[None, :, 0] - s * pts[None, :, 1], s * pts[None, :, 0] + c * pts[None, :, 1]], axis=-1)
 
 
-def _dot2(a: FloatArray, b: FloatArray) -> FloatArray:
-    """``einsum("bnk,mk->bnm", a, b)`` for 2-vectors, as two products and a sum."""
-    return a[:, :, None, 0] * b[None, None, :, 0] + a[:, :, None, 1] * b[None, None, :, 1]
+@dataclass(frozen=True, eq=False)
+class _Pairs:
+    """The principal-contact tests of object features against environment features,
+    laid out as (X, N, Y): axis 1 the object's features, the environment's features
+    broadcast along axes 0 and 2 (every edge along axis 2 for a dense frame, one edge
+    per row along axis 0 for chosen (pose, edge) pairs). ``ev`` is the environment
+    vertex at the start of the edge (vertex ``j`` starts edge ``j``). The subsumption of
+    the contacts at an edge-edge contact's ends is left to the caller."""
+
+    u: FloatArray  # vertex i projected on env edge j (arc length from its start)
+    s: FloatArray  # signed distance of vertex i from the line of env edge j
+    ve: BoolArray
+    ev: BoolArray
+    ee: BoolArray
+    ee_lo: FloatArray  # overlap interval of l_i on e_j (arc length on e_j)
+    ee_hi: FloatArray
 
 
-def _frame(world: World, poses: FloatArray, tol: float) -> _Frame:
+def _pair_tests(world: World, V: FloatArray, D: FloatArray, Nn: FloatArray, j: IntArray | slice,
+                env_shape: tuple[int, ...], tol: float) -> _Pairs:
+    """:class:`_Pairs` of the object at ``V``, ``D``, ``Nn`` ((X, N, 2) each: vertices,
+    edge directions, outward normals) against environment edges (and their start
+    vertices) ``env.*[j]`` reshaped to ``env_shape`` ((1, 1, M) or (P, 1, 1))."""
     poly = world.object.polygon
     env = world.environment
     n = poly.vertices.shape[0]
     prev = (np.arange(n) - 1) % n  # index shifts instead of np.roll
     nxt = (np.arange(n) + 1) % n
-    theta = poses[:, 2]
-    V = _rotate(theta, poly.vertices) + poses[:, None, :2]
-    D = _rotate(theta, poly.edge_directions)
-    Nn = np.stack([D[..., 1], -D[..., 0]], axis=-1)
     Lo = poly.edge_lengths
-    A, T, Ne, Le = env.vertices, env.edge_directions, env.normals, env.edge_lengths
-    W = env.vertices
     tol2 = tol * tol
+    Vx, Vy, Dx, Dy, Nx, Ny = (a[:, :, None] for a in (V[..., 0], V[..., 1], D[..., 0], D[..., 1], Nn[..., 0], Nn[..., 1]))
+
+    def e(a: NDArray) -> NDArray:  # an environment table, per edge, laid out for broadcasting
+        return a[j].reshape(env_shape)
+
+    Ax, Ay = e(env.vertices[:, 0]), e(env.vertices[:, 1])
+    Tx, Ty = e(env.edge_directions[:, 0]), e(env.edge_directions[:, 1])
+    Nex, Ney = e(env.normals[:, 0]), e(env.normals[:, 1])
+    Le = e(env.edge_lengths)
+    arrive = env.vertex_edges[:, 0]
+    Tax, Tay = e(env.edge_directions[arrive, 0]), e(env.edge_directions[arrive, 1])
+    Lea = e(env.edge_lengths[arrive])
+    Lo_i = Lo[None, :, None]
 
     # ---- vertex-edge: object vertex i vs environment edge j -------------------------
-    rx = V[:, :, None, 0] - A[None, None, :, 0]
-    ry = V[:, :, None, 1] - A[None, None, :, 1]
-    u = rx * T[:, 0] + ry * T[:, 1]  # (B, N, M)
-    s = rx * Ne[:, 0] + ry * Ne[:, 1]
+    rx = Vx - Ax
+    ry = Vy - Ay
+    u = rx * Tx + ry * Ty
+    s = rx * Nex + ry * Ney
     uc = np.clip(u, 0.0, Le)
     near_ve = (u - uc) ** 2 + s**2 <= tol2
-    nd_next = _dot2(D, Ne)  # d_i . n_j, d_i leaving v_i along l_i
+    nd_next = Dx * Nex + Dy * Ney  # d_i . n_j, d_i leaving v_i along l_i
     nd_prev = -nd_next[:, prev]  # -d_(i-1) . n_j, leaving v_i along l_(i-1)
-    side_ve = (nd_next >= -tol / Lo[None, :, None]) & (nd_prev >= -tol / Lo[prev][None, :, None])
+    side_ve = (nd_next >= -tol / Lo_i) & (nd_prev >= -tol / Lo[prev][None, :, None])
     ve = near_ve & side_ve & poly.convex_vertices[None, :, None]
 
-    # ---- edge-vertex: environment vertex k vs object edge i -------------------------
-    wx = W[None, None, :, 0] - V[:, :, None, 0]
-    wy = W[None, None, :, 1] - V[:, :, None, 1]
-    eu = wx * D[:, :, None, 0] + wy * D[:, :, None, 1]  # (B, N, M) along l_i
-    es = wx * Nn[:, :, None, 0] + wy * Nn[:, :, None, 1]
-    euc = np.clip(eu, 0.0, Lo[None, :, None])
+    # ---- edge-vertex: environment vertex k (the start of edge k) vs object edge i ----
+    wx = Ax - Vx
+    wy = Ay - Vy
+    eu = wx * Dx + wy * Dy  # along l_i
+    es = wx * Nx + wy * Ny
+    euc = np.clip(eu, 0.0, Lo_i)
     near_ev = (eu - euc) ** 2 + es**2 <= tol2
-    arrive = env.vertex_edges[:, 0]
-    nt_next = _dot2(Nn, T)  # n_i . t_k (edge leaving ve_k)
-    nt_prev = -_dot2(Nn, T[arrive])  # n_i . (-t of the arriving edge)
-    side_ev = (nt_next >= -tol / Le[None, None, :]) & (nt_prev >= -tol / Le[arrive][None, None, :])
-    ev = near_ev & side_ev & env.vertex_convex[None, None, :]
+    nt_next = Nx * Tx + Ny * Ty  # n_i . t_k (edge leaving ve_k)
+    nt_prev = -(Nx * Tax + Ny * Tay)  # n_i . (-t of the arriving edge)
+    side_ev = (nt_next >= -tol / Le) & (nt_prev >= -tol / Lea)
+    ev = near_ev & side_ev & e(env.vertex_convex)
 
     # ---- edge-edge: object edge i (v_i -> v_i+1) vs environment edge j --------------
     uP, sP = u, s
     uQ, sQ = u[:, nxt], s[:, nxt]
-    facing = _dot2(Nn, Ne) < 0.0
+    facing = Nx * Nex + Ny * Ney < 0.0
     lo = np.maximum(np.minimum(uP, uQ), 0.0)
     hi = np.minimum(np.maximum(uP, uQ), Le)
     denom = uQ - uP
@@ -192,11 +215,89 @@ def _frame(world: World, poses: FloatArray, tol: float) -> _Frame:
     s_lo = sP + (sQ - sP) * (lo - uP) / safe
     s_hi = sP + (sQ - sP) * (hi - uP) / safe
     ee = ok & (np.abs(s_lo) <= tol) & (np.abs(s_hi) <= tol)
+    return _Pairs(u, s, ve, ev, ee, lo, hi)
 
+
+def _placed(world: World, poses: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The object's world vertices, edge directions and outward normals, (B, N, 2) each."""
+    poly = world.object.polygon
+    theta = poses[:, 2]
+    V = _rotate(theta, poly.vertices) + poses[:, None, :2]
+    D = _rotate(theta, poly.edge_directions)
+    Nn = np.stack([D[..., 1], -D[..., 0]], axis=-1)
+    return V, D, Nn
+
+
+def _frame(world: World, poses: FloatArray, tol: float) -> _Frame:
+    env = world.environment
+    n = world.object.n
+    prev = (np.arange(n) - 1) % n
+    V, D, Nn = _placed(world, poses)
+    pr = _pair_tests(world, V, D, Nn, slice(None), (1, 1, env.m), tol)
     # ---- subsumption: an edge-edge contact absorbs the contacts at its overlap ends --
-    ve = ve & ~ee & ~ee[:, prev]  # v_i is the start of l_i and the end of l_(i-1)
-    ev = ev & ~ee & ~ee[:, :, arrive]  # ve_k is the start of e_k and the end of e_arrive(k)
-    return _Frame(V, D, Nn, u, s, ContactMasks(ve, ev, ee), lo, hi)
+    ee, arrive = pr.ee, env.vertex_edges[:, 0]
+    ve = pr.ve & ~ee & ~ee[:, prev]  # v_i is the start of l_i and the end of l_(i-1)
+    ev = pr.ev & ~ee & ~ee[:, :, arrive]  # ve_k is the start of e_k and the end of e_arrive(k)
+    return _Frame(V, D, Nn, pr.u, pr.s, ContactMasks(ve, ev, ee), pr.ee_lo, pr.ee_hi)
+
+
+#: Slack (mm) of :func:`_masks`' test of which environment edges the object may touch:
+#: far above the rounding of the placed coordinates (1e-12 mm at metres from the origin).
+_NEAR_SLACK = 1e-3
+
+
+def _bounding_disk(world: World) -> tuple[FloatArray, float]:
+    """Centre (object frame) and radius of a disk holding the object (cached per world)."""
+    hit = _DISKS.get(world)
+    if hit is None:
+        v = world.object.polygon.vertices
+        centre = 0.5 * (v.min(axis=0) + v.max(axis=0))
+        hit = _DISKS[world] = (centre, float(np.sqrt(((v - centre) ** 2).sum(axis=1)).max()))
+    return hit
+
+
+_DISKS: "weakref.WeakKeyDictionary[World, tuple[FloatArray, float]]" = weakref.WeakKeyDictionary()
+
+
+def _masks(world: World, poses: FloatArray, tol: float) -> ContactMasks:
+    """``_frame(world, poses, tol).masks``, computed only where a contact can be.
+
+    Every principal contact with environment edge ``j`` (or with its start vertex ``j``)
+    puts an object point within ``tol`` of the segment ``e_j``, so only the (pose, edge)
+    pairs whose bounding disk of the object comes within ``tol`` (plus
+    :data:`_NEAR_SLACK`) of the segment are tested, by the same arithmetic on the same
+    numbers as the dense frame; every other entry is False, as there. A small batch is
+    computed densely (the pairs' bookkeeping costs more than it saves).
+    """
+    env = world.environment
+    b, n, m = poses.shape[0], world.object.n, env.m
+    if b < _DENSE_BELOW:
+        return _frame(world, poses, tol).masks
+    centre, radius = _bounding_disk(world)
+    c, s_ = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    cx = c * centre[0] - s_ * centre[1] + poses[:, 0]
+    cy = s_ * centre[0] + c * centre[1] + poses[:, 1]
+    A, T, Le = env.vertices, env.edge_directions, env.edge_lengths
+    rx, ry = cx[:, None] - A[None, :, 0], cy[:, None] - A[None, :, 1]
+    along = np.clip(rx * T[None, :, 0] + ry * T[None, :, 1], 0.0, Le[None, :])
+    reach = radius + tol + _NEAR_SLACK
+    pb, pj = np.nonzero((rx - along * T[None, :, 0]) ** 2 + (ry - along * T[None, :, 1]) ** 2 <= reach * reach)
+    ve = np.zeros((b, n, m), dtype=bool)
+    ev = np.zeros((b, n, m), dtype=bool)
+    ee = np.zeros((b, n, m), dtype=bool)
+    if pb.size:
+        V, D, Nn = _placed(world, poses)
+        pr = _pair_tests(world, V[pb], D[pb], Nn[pb], pj, (pb.size, 1, 1), tol)
+        prev = (np.arange(n) - 1) % n
+        ee[pb, :, pj] = pr.ee[:, :, 0]
+        ve[pb, :, pj] = (pr.ve & ~pr.ee & ~pr.ee[:, prev])[:, :, 0]
+        arrive = env.vertex_edges[:, 0]
+        ev[pb, :, pj] = pr.ev[:, :, 0] & ~pr.ee[:, :, 0] & ~ee[pb, :, arrive[pj]]
+    return ContactMasks(ve, ev, ee)
+
+
+#: Batches smaller than this are identified densely by :func:`_masks`.
+_DENSE_BELOW = 128
 
 
 def _as_poses(poses: Pose | ArrayLike) -> FloatArray:
@@ -225,8 +326,8 @@ def principal_contact_masks(world: World, poses: Pose | ArrayLike, tol: float = 
     # Bound the (B, N, M) temporaries to a few million elements per chunk.
     chunk = max(1, 2_000_000 // max(1, world.object.n * world.environment.m))
     if p.shape[0] <= chunk:
-        return _frame(world, p, float(tol)).masks
-    parts = [_frame(world, p[k:k + chunk], float(tol)).masks for k in range(0, p.shape[0], chunk)]
+        return _masks(world, p, float(tol))
+    parts = [_masks(world, p[k:k + chunk], float(tol)) for k in range(0, p.shape[0], chunk)]
     return ContactMasks(np.concatenate([m.vertex_edge for m in parts]),
                         np.concatenate([m.edge_vertex for m in parts]),
                         np.concatenate([m.edge_edge for m in parts]))
@@ -727,29 +828,42 @@ def _equations(world: World, tg: _Targets, theta: FloatArray,
 
 
 def _within(world: World, tg: _Targets, c: IntArray, poses: FloatArray, tol: float) -> BoolArray:
-    """Whether target contact ``c[b]`` lies within its finite features at ``poses[b]``."""
+    """Whether target contact ``c[b]`` lies within its finite features at ``poses[b]``.
+
+    Each kind is tested on its own rows (every number is elementwise, so a row's answer
+    does not depend on the others)."""
     poly = world.object.polygon
     env = world.environment
-    kind, oi, ej = tg.kind[c], tg.obj[c], tg.env[c]
-    cth, sth = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    kind = tg.kind[c]
+    out = np.zeros(c.size, dtype=bool)
+    for k in (_VE, _EE, _EV):
+        rows = np.flatnonzero(kind == k)
+        if not rows.size:
+            continue
+        cr, p = c[rows], poses[rows]
+        oi, ej = tg.obj[cr], tg.env[cr]
+        cth, sth = np.cos(p[:, 2]), np.sin(p[:, 2])
 
-    def place(v: FloatArray) -> FloatArray:
-        return np.stack([cth * v[:, 0] - sth * v[:, 1] + poses[:, 0], sth * v[:, 0] + cth * v[:, 1] + poses[:, 1]], -1)
+        def place(v: FloatArray) -> FloatArray:
+            return np.stack([cth * v[:, 0] - sth * v[:, 1] + p[:, 0], sth * v[:, 0] + cth * v[:, 1] + p[:, 1]], -1)
 
-    e_edge = np.where(kind == _EV, 0, ej)
-    a_e, t_e = env.vertices[e_edge], env.edge_directions[e_edge]
-    P = place(poly.vertices[oi])
-    Q = place(poly.vertices[(oi + 1) % len(poly)])
-    uP = np.einsum("bk,bk->b", P - a_e, t_e)
-    uQ = np.einsum("bk,bk->b", Q - a_e, t_e)
-    lo, hi = tg.lo[c], tg.hi[c]
-    ok_ve = (uP >= lo - tol) & (uP <= hi + tol)
-    ok_ee = np.minimum(np.maximum(uP, uQ), hi) - np.maximum(np.minimum(uP, uQ), lo) > tol
-    w = env.vertices[np.where(kind == _EV, ej, 0)]
-    L = poly.edge_lengths[oi]
-    sv = np.einsum("bk,bk->b", w - P, (Q - P)) / L
-    ok_ev = (sv >= -tol) & (sv <= L + tol)
-    return np.where(kind == _VE, ok_ve, np.where(kind == _EE, ok_ee, ok_ev))
+        P = place(poly.vertices[oi])
+        if k == _EV:
+            Q = place(poly.vertices[(oi + 1) % len(poly)])
+            L = poly.edge_lengths[oi]
+            sv = np.einsum("bk,bk->b", env.vertices[ej] - P, (Q - P)) / L
+            out[rows] = (sv >= -tol) & (sv <= L + tol)
+            continue
+        a_e, t_e = env.vertices[ej], env.edge_directions[ej]
+        uP = np.einsum("bk,bk->b", P - a_e, t_e)
+        lo, hi = tg.lo[cr], tg.hi[cr]
+        if k == _VE:
+            out[rows] = (uP >= lo - tol) & (uP <= hi + tol)
+            continue
+        Q = place(poly.vertices[(oi + 1) % len(poly)])
+        uQ = np.einsum("bk,bk->b", Q - a_e, t_e)
+        out[rows] = np.minimum(np.maximum(uP, uQ), hi) - np.maximum(np.minimum(uP, uQ), lo) > tol
+    return out
 
 
 def _farthest_points(x: FloatArray, k: int) -> IntArray:
@@ -873,8 +987,8 @@ def enumerate_contact_states(
     poses = np.concatenate(cand_p)
     # ---- target contacts within their finite features -----------------------------------
     ok = _within(world, tg, cc1, poses, tol)
-    has2 = cc2 >= 0
-    ok[has2] &= _within(world, tg, cc2[has2], poses[has2], tol)
+    both = np.flatnonzero(ok & (cc2 >= 0))  # the second contact, where the first holds
+    ok[both] = _within(world, tg, cc2[both], poses[both], tol)
     poses = poses[ok]
     n_candidates = int(ok.size)
     # ---- cheap penetration pre-filter: no object vertex deep inside a solid ------------

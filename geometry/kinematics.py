@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import enum
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -197,6 +198,74 @@ def two_contact(world: World, start: Pose, kept: tuple[Contact, Contact], sense:
     return m
 
 
+def _poses_many(motions: Sequence[Motion], params: Sequence[Sequence[float] | FloatArray]) -> list[FloatArray]:
+    """``[m.poses(s) for m, s in zip(motions, params)]``, each kind of motion in one
+    vectorised computation: :meth:`Motion.poses`' formulas with each row's motion's
+    numbers (elementwise, so the same numbers)."""
+    s_each = [np.atleast_1d(np.asarray(x, dtype=float)).ravel() for x in params]
+    sizes = [x.size for x in s_each]
+    if not s_each:
+        return []
+    s = np.concatenate(s_each)
+    out = np.empty((s.size, 3))
+    owner = np.repeat(np.arange(len(motions)), sizes)
+    code = {MotionKind.TRANSLATE: 0, MotionKind.ROTATE: 1, MotionKind.TWO_CONTACT: 2}
+    kind = np.array([code[m.kind] for m in motions], dtype=np.int64)[owner]
+    x0 = np.array([m.start.x for m in motions], dtype=float)
+    y0 = np.array([m.start.y for m in motions], dtype=float)
+    t0 = np.array([m.start.theta for m in motions], dtype=float)
+    sense = np.array([m.sense for m in motions], dtype=float)
+    rows = np.flatnonzero(kind == 0)
+    if rows.size:
+        o, sr = owner[rows], s[rows]
+        d = np.array([m.direction if m.kind is MotionKind.TRANSLATE else (0.0, 0.0) for m in motions], dtype=float)
+        out[rows, 0] = x0[o] + sr * d[o, 0]
+        out[rows, 1] = y0[o] + sr * d[o, 1]
+        out[rows, 2] = t0[o]
+    rows = np.flatnonzero(kind == 1)
+    if rows.size:
+        o, sr = owner[rows], s[rows]
+        pv = np.array([m.pivot if m.kind is MotionKind.ROTATE else (0.0, 0.0) for m in motions], dtype=float)
+        px, py = pv[o, 0], pv[o, 1]
+        a = sense[o] * sr
+        c, sn = np.cos(a), np.sin(a)
+        out[rows, 0] = px + c * (x0[o] - px) - sn * (y0[o] - py)
+        out[rows, 1] = py + sn * (x0[o] - px) + c * (y0[o] - py)
+        out[rows, 2] = wrap_angle(t0[o] + a)
+    rows = np.flatnonzero(kind == 2)
+    if rows.size:
+        o, sr = owner[rows], s[rows]
+        lines = np.array([m.lines if m.kind is MotionKind.TWO_CONTACT else ((0.0,) * 6,) * 2 for m in motions],
+                         dtype=float)  # (motions, 2, 6)
+        theta = t0[o] + sense[o] * sr
+        out[rows, 2] = wrap_angle(theta)
+        out[rows, :2] = _solve_line_rows(lines[o], theta)
+    return np.split(out, np.cumsum(sizes)[:-1])
+
+
+def _solve_line_rows(lines: FloatArray, theta: FloatArray) -> FloatArray:
+    """:func:`_solve_two_lines` with each row's own two lines, (n, 2, 6)."""
+    c, s = np.cos(theta), np.sin(theta)
+    A = np.empty(theta.shape + (2, 2))
+    b = np.empty(theta.shape + (2,))
+    for row in range(2):
+        kind, u0, u1, w0, w1, k = lines[:, row].T
+        edge = kind == 0.0
+        rx = c * u0 - s * u1  # R p (vertex-edge) or R m (edge-vertex)
+        ry = s * u0 + c * u1
+        A[:, row, 0] = np.where(edge, w0, rx)
+        A[:, row, 1] = np.where(edge, w1, ry)
+        b[:, row] = np.where(edge, k - (w0 * rx + w1 * ry), rx * w0 + ry * w1 - k)
+    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+    ok = np.abs(det) > 1e-9
+    safe = np.where(ok, det, 1.0)
+    tx = (b[..., 0] * A[..., 1, 1] - b[..., 1] * A[..., 0, 1]) / safe
+    ty = (A[..., 0, 0] * b[..., 1] - A[..., 1, 0] * b[..., 0]) / safe
+    out = np.stack([tx, ty], axis=-1)
+    out[~ok] = np.nan
+    return out
+
+
 # --------------------------------------------------------------------------- sweeps
 
 
@@ -290,6 +359,58 @@ def kept_contact_holds(world: World, contact: Contact, poses: FloatArray, tol: f
     raise ValueError("edge-edge contacts are kept through one of their vertex contacts")
 
 
+def _kept_params(world: World, contact: Contact) -> tuple[float, ...]:
+    """The numbers :func:`kept_contact_holds` tests a contact by: ``(kind, point x, y,
+    edge start x, y, edge vector x, y, edge length)``, kind 0 for vertex-edge (object
+    vertex, environment edge), 1 for edge-vertex (environment vertex, object edge)."""
+    if contact.kind is ContactKind.VERTEX_EDGE:
+        p = world.object.polygon.vertices[contact.obj]
+        a, b = world.environment.edges[contact.env]
+        kind = 0.0
+    elif contact.kind is ContactKind.EDGE_VERTEX:
+        p = world.environment.vertices[contact.env]
+        a, b = world.object.polygon.edges[contact.obj]
+        kind = 1.0
+    else:
+        raise ValueError("edge-edge contacts are kept through one of their vertex contacts")
+    d = b - a
+    return (kind, float(p[0]), float(p[1]), float(a[0]), float(a[1]), float(d[0]), float(d[1]), float(np.hypot(*d)))
+
+
+def _kept_hold_rows(world: World, kept: Sequence[Sequence[Contact]], sizes: Sequence[int], poses: FloatArray,
+                    tol: float = CONTACT_TOL) -> NDArray[np.bool_]:
+    """:func:`kept_contact_holds` of several motions' contacts in one computation: the
+    poses are ``sizes[i]`` consecutive rows per motion ``i``, whose contacts are
+    ``kept[i]``; a row is True when all its motion's contacts hold (the same numbers as
+    one call per contact)."""
+    P = np.asarray(poses, dtype=float).reshape(-1, 3)
+    out = np.ones(P.shape[0], dtype=bool)
+    starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    for q in range(max((len(k) for k in kept), default=0)):
+        sel = [i for i, k in enumerate(kept) if len(k) > q and sizes[i]]
+        if not sel:
+            continue
+        rows = np.concatenate([np.arange(starts[i], starts[i + 1]) for i in sel])
+        par = np.repeat(np.array([_kept_params(world, kept[i][q]) for i in sel]), [sizes[i] for i in sel], axis=0)
+        Q = P[rows]
+        c, s = np.cos(Q[:, 2]), np.sin(Q[:, 2])
+        kind, p0, p1, a0, a1, d0, d1, L = par.T
+        ve = kind == 0.0
+        u = np.empty(rows.size)
+        # vertex-edge: the object vertex, placed, projected on the environment edge
+        wx = c[ve] * p0[ve] - s[ve] * p1[ve] + Q[ve, 0]
+        wy = s[ve] * p0[ve] + c[ve] * p1[ve] + Q[ve, 1]
+        u[ve] = ((wx - a0[ve]) * d0[ve] + (wy - a1[ve]) * d1[ve]) / L[ve]
+        # edge-vertex: the environment vertex, in the object frame, projected on the object edge
+        ev = ~ve
+        dx, dy = p0[ev] - Q[ev, 0], p1[ev] - Q[ev, 1]
+        qx = c[ev] * dx + s[ev] * dy
+        qy = -s[ev] * dx + c[ev] * dy
+        u[ev] = ((qx - a0[ev]) * d0[ev] + (qy - a1[ev]) * d1[ev]) / L[ev]
+        out[rows] &= (u >= -tol) & (u <= L + tol)
+    return out
+
+
 def _last_true(pred: Callable[[FloatArray], NDArray[np.bool_]], lo: float, hi: float, bits: int,
                width: int = 64) -> float:
     """Largest x in [lo, hi] with ``pred(x)`` true, for a predicate true at ``lo``, false
@@ -310,7 +431,7 @@ def _last_true_many(pred: Callable[[list[FloatArray]], list[NDArray[np.bool_]]],
     for _ in range(rounds):
         if not lo:
             break
-        xs = [np.linspace(a, b, width + 2)[1:-1] for a, b in zip(lo, hi)]
+        xs = list(_linspaces(lo, hi, width + 2)[:, 1:-1])
         for k, (x, ok) in enumerate(zip(xs, pred(xs))):
             bad = np.flatnonzero(~ok)
             if bad.size == 0:
@@ -320,6 +441,20 @@ def _last_true_many(pred: Callable[[list[FloatArray]], list[NDArray[np.bool_]]],
                 hi[k] = float(x[i])
                 lo[k] = float(x[i - 1]) if i > 0 else lo[k]
     return lo
+
+
+def _linspaces(lo: Sequence[float], hi: Sequence[float], num: int) -> FloatArray:
+    """``np.linspace(lo[k], hi[k], num)`` of each interval, as the rows of one array:
+    numpy's arithmetic (``i * step + start``, the end set to ``stop``) on all rows at once;
+    one interval at a time when some step is zero (numpy then computes differently)."""
+    a, b = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    step = (b - a) / (num - 1) if num > 1 else np.zeros(a.size)
+    if np.any(step == 0):
+        return np.array([np.linspace(x, y, num) for x, y in zip(a, b)]).reshape(a.size, num)
+    out = np.arange(0, num, dtype=float)[None, :] * step[:, None]
+    out += a[:, None]
+    out[:, -1] = b
+    return out
 
 
 def sweep(
@@ -367,27 +502,22 @@ def sweep_many(
         return []
     overlap = overlap_fn or _default_overlap
     motions = [m for m, _ in jobs]
-    grids = [_Grid(world, m, 0.0, s_max, step_mm) for m, s_max in jobs]
+    grids = _grids(world, [(m, 0.0, s_max) for m, s_max in jobs], step_mm)
 
     def good(which: Sequence[int], poses: Sequence[FloatArray]) -> list[NDArray[np.bool_]]:
         """Whether each pose of ``poses[i]`` (motion ``which[i]``) is finite, keeps the
         motion's contacts and does not overlap (one overlap call for all)."""
-        oks, todo = [], []
-        for k, p in zip(which, poses):
-            ok = np.all(np.isfinite(p), axis=1)
-            safe = np.where(np.isfinite(p), p, 0.0)
-            for c in motions[k].kept:
-                ok &= kept_contact_holds(world, c, safe)
-            oks.append(ok)
-            todo.append(np.flatnonzero(ok))
-        sizes = [idx.size for idx in todo]
-        if sum(sizes):
-            hit = overlap(world, np.concatenate([p[idx] for p, idx in zip(poses, todo)]))
-            at = 0
-            for ok, idx, n in zip(oks, todo, sizes):
-                ok[idx] = ~hit[at:at + n]
-                at += n
-        return oks
+        if not poses:
+            return []
+        sizes = [p.shape[0] for p in poses]
+        every = np.concatenate(poses)
+        finite = np.isfinite(every)
+        ok = np.all(finite, axis=1)
+        ok &= _kept_hold_rows(world, [motions[k].kept for k in which], sizes, np.where(finite, every, 0.0))
+        todo = np.flatnonzero(ok)
+        if todo.size:
+            ok[todo] = ~overlap(world, every[todo])
+        return np.split(ok, np.cumsum(sizes)[:-1])
 
     # Walk in chunks that double, stopping at the first bad sample: most sweeps end (a
     # new contact, a kept contact lost) long before s_max, and a two-contact motion's
@@ -429,7 +559,7 @@ def sweep_many(
         else:
             end[k] = SweepEnd.BLOCKED
     last = _last_true_many(
-        lambda xs: good(refine, [motions[k].poses(x) for k, x in zip(refine, xs)]),
+        lambda xs: good(refine, _poses_many([motions[k] for k in refine], xs)),
         [float(grids[k].s[first_bad[k] - 1]) for k in refine],  # type: ignore[operator]
         [float(grids[k].s[first_bad[k]]) for k in refine], refine_bits)  # type: ignore[index]
     last_of = dict(zip(refine, last))
@@ -459,7 +589,7 @@ def sweep_many(
     changed = np.zeros(rows.shape[0], dtype=bool)  # row i differs from row i - 1 of its sweep
     changed[1:] = np.any(rows[1:] != rows[:-1], axis=1)
     changed[offsets[:-1]] = False
-    states: dict[bytes, ContactState] = {}
+    states = _STATES.setdefault(world, {})  # a packed row names one state of the world
 
     def state(i: int) -> ContactState:
         key = rows[i].tobytes()
@@ -478,7 +608,7 @@ def sweep_many(
             start_i = i
 
     def same(xs: list[FloatArray]) -> list[NDArray[np.bool_]]:
-        placed = [motions[k].poses(x) for (k, _, _), x in zip(changes, xs)]
+        placed = _poses_many([motions[k] for k, _, _ in changes], xs)
         got = _state_rows(world, np.concatenate(placed), tol)[0] if placed else rows[:0]
         out, at = [], 0
         for (k, _, start_i), p in zip(changes, placed):
@@ -507,6 +637,10 @@ def sweep_many(
         out.append(Sweep(motions[k], tuple(pieces), end[k]))
     return out
 
+
+#: The contact state of each packed row of principal-contact masks met so far, per world
+#: (:func:`_state_rows`: the row is the masks, so it names the state).
+_STATES: "weakref.WeakKeyDictionary[World, dict[bytes, ContactState]]" = weakref.WeakKeyDictionary()
 
 #: A two-contact motion's grid starts at most this fast (object radii of vertex motion
 #: per radian) and is subdivided where it moves faster: its speed bound is a finite
@@ -542,6 +676,38 @@ def _grid_poses(world: World, motion: Motion, s0: float, s1: float, step_mm: flo
     return _Grid(world, motion, s0, s1, step_mm).whole()
 
 
+def _uniform_grids(world: World, jobs: Sequence[tuple[Motion, float, float]], step_mm: float
+                   ) -> list[tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]]:
+    """The uniform grid of each ``(motion, s0, s1)`` (sized by the motion's vertex speed,
+    see :func:`_grid`): its values, poses, the object's placed vertices (x and y, (n+1, N)
+    each) and the longest vertex step of each interval; the poses and vertices of all
+    the grids in one computation (elementwise: the numbers of one grid at a time)."""
+    values = []
+    for motion, s0, s1 in jobs:
+        speed = max(motion.vertex_speed(world), EPS)
+        if motion.kind is MotionKind.TWO_CONTACT:
+            speed = min(speed, TWO_CONTACT_SPEED_CAP * world.object.polygon.radius)
+        n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))  # uniform intervals
+        values.append(np.linspace(s0, s1, n + 1))
+    poses = _poses_many([m for m, _, _ in jobs], values)
+    if not poses:
+        return []
+    wx, wy = _placed_vertices(world, np.concatenate(poses))
+    step = np.max(np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)), axis=1)  # consecutive samples
+    out, at = [], 0
+    for s, p in zip(values, poses):
+        k = s.size
+        out.append((s, p, wx[at:at + k], wy[at:at + k], step[at:at + k - 1]))
+        at += k
+    return out
+
+
+def _grids(world: World, jobs: Sequence[tuple[Motion, float, float]], step_mm: float) -> list["_Grid"]:
+    """A :class:`_Grid` of each ``(motion, s0, s1)``, their uniform grids computed together."""
+    return [_Grid(world, m, s0, s1, step_mm, uniform)
+            for (m, s0, s1), uniform in zip(jobs, _uniform_grids(world, jobs, step_mm))]
+
+
 class _Grid:
     """:func:`_grid`'s values and poses, computed as far as a sweep walks them.
 
@@ -562,16 +728,16 @@ class _Grid:
     too. When that bound does not hold, the whole grid is computed.
     """
 
-    def __init__(self, world: World, motion: Motion, s0: float, s1: float, step_mm: float) -> None:
-        speed = max(motion.vertex_speed(world), EPS)
-        if motion.kind is MotionKind.TWO_CONTACT:
-            speed = min(speed, TWO_CONTACT_SPEED_CAP * world.object.polygon.radius)
-        self.n = max(1, int(math.ceil(abs(s1 - s0) * speed / step_mm)))  # uniform intervals
+    def __init__(self, world: World, motion: Motion, s0: float, s1: float, step_mm: float,
+                 uniform: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray] | None = None) -> None:
+        """``uniform``: the uniform grid's values, poses, placed vertices (x and y) and
+        the longest vertex step of each interval, as :func:`_grids` computes them for
+        several grids at once (computed here when ``None``)."""
         self.world, self.motion, self.step = world, motion, step_mm
-        self.s0 = np.linspace(s0, s1, self.n + 1)
-        self.p0 = motion.poses(self.s0)
-        self.wx, self.wy = _placed_vertices(world, self.p0)
-        self.d0 = np.max(np.hypot(np.diff(self.wx, axis=0), np.diff(self.wy, axis=0)), axis=1)  # consecutive samples
+        if uniform is None:
+            uniform = _uniform_grids(world, [(motion, s0, s1)], step_mm)[0]
+        self.s0, self.p0, self.wx, self.wy, self.d0 = uniform
+        self.n = self.s0.size - 1  # uniform intervals
         self.m = 0  # uniform intervals halved so far
         self.s, self.p = self.s0[:1], self.p0[:1]
 
@@ -603,9 +769,11 @@ class _Grid:
         poses; ``None`` when that cannot be told without the rest."""
         outside = self.n - m  # samples after them
         s, p, wx, wy, d = self.s0[:m + 1], self.p0[:m + 1], self.wx[:m + 1], self.wy[:m + 1], self.d0[:m]
+        k = np.flatnonzero(d > self.step)
+        if not k.size:  # nothing to halve (the rounds below would stop at once)
+            return s, p
         undefined = np.flatnonzero(~np.isfinite(d))
         first_undefined = float(s[undefined[0]]) if undefined.size else math.inf  # its start
-        k = np.flatnonzero(d > self.step)
         # the intervals still too long: their ends and the object's vertices there
         a, b = s[k], s[k + 1]
         ax, ay, bx, by = wx[k], wy[k], wx[k + 1], wy[k + 1]

@@ -383,6 +383,15 @@ def _point_contacts(world: World, pose: Pose) -> list[Contact]:
     return list(dict.fromkeys(out))
 
 
+def _point_contacts_at(ctx: PlanningContext, pose: Pose) -> list[Contact]:
+    """:func:`_point_contacts` at ``pose``, memoised in ``ctx.memo`` (the push and the
+    biplanar-slide families ask for the same witness poses)."""
+    key = ("point-contacts", pose)
+    if key not in ctx.memo:
+        ctx.memo[key] = tuple(_point_contacts(ctx.world, pose))
+    return list(ctx.memo[key])
+
+
 def _line_direction(world: World, c: Contact, pose: Pose) -> np.ndarray:
     """Tangent of the line a kept point contact stays on, at ``pose``."""
     if c.kind is ContactKind.VERTEX_EDGE:
@@ -418,7 +427,7 @@ class Push(_Swept):
     def families(self, ctx: PlanningContext, pose: Pose) -> list[Family_]:
         world = ctx.world
         kept_by_edge: dict[int, list[Contact]] = {}
-        for c in _point_contacts(world, pose):
+        for c in _point_contacts_at(ctx, pose):
             if c.kind is ContactKind.VERTEX_EDGE:
                 kept_by_edge.setdefault(c.env, []).append(c)
         out: list[Family_] = []
@@ -440,7 +449,7 @@ class BiplanarSlide(_Swept):
 
     def families(self, ctx: PlanningContext, pose: Pose) -> list[Family_]:
         world = ctx.world
-        pcs = _point_contacts(world, pose)
+        pcs = _point_contacts_at(ctx, pose)
         out: list[Family_] = []
         for a in range(len(pcs)):
             for b in range(a + 1, len(pcs)):

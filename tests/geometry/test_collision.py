@@ -339,3 +339,60 @@ def test_polygon_prefilter_matches_plain_intersects(tol: float) -> None:
     for part in parts:
         ref |= shapely.intersects(target.geometry, shapely.polygons(transform_points(poses, part[None])))
     assert (_parts_vs_geometry(parts, poses, target) == ref).all()
+
+
+def test_orientation_signs_are_certain_or_zero() -> None:
+    """collision._orient_sign: the exact sign of orient2d where the filter is sure (checked
+    in rationals), 0 on the line and beside it within rounding."""
+    from fractions import Fraction
+
+    from geometry.collision import _orient_sign
+
+    rng = np.random.default_rng(4)
+    a, b = rng.uniform(-500, 500, (2, 400, 2))
+    t = rng.uniform(-1, 2, 400)
+    c = a + t[:, None] * (b - a)  # on the line, up to rounding
+    c[:200] += rng.normal(0.0, 1e-12, (200, 2)) * 10.0 ** rng.integers(0, 13, (200, 1))
+    got = _orient_sign(a[:, 0], a[:, 1], b[:, 0], b[:, 1], c[:, 0], c[:, 1])
+    for i in range(400):
+        fa, fb, fc = ([Fraction(float(v)) for v in p[i]] for p in (a, b, c))
+        exact = (fa[0] - fc[0]) * (fb[1] - fc[1]) - (fa[1] - fc[1]) * (fb[0] - fc[0])
+        assert got[i] == 0 or got[i] == (exact > 0) - (exact < 0)
+    assert np.count_nonzero(got) > 50 and np.count_nonzero(got[200:] == 0) > 150
+    assert _orient_sign(*map(np.array, (0.0, 0.0, 1.0, 0.0, 0.5, 0.0))) == 0
+
+
+def test_convex_parts_are_decided_as_geos_decides() -> None:
+    """collision._convex_vs_target, the exact-sign test of strictly convex parts: where it
+    decides, it is shapely.intersects; it decides clear crossings, a target inside the part
+    and clear misses, and leaves touching ones to GEOS."""
+    from geometry.collision import _convex_vs_target, _strictly_convex
+
+    target = eroded_environment(Environment((Solid("slot", make_polygon(
+        [[300, 0], [0, 0], [0, 75], [-200, 75], [-200, -50], [500, -50], [500, 75], [300, 75]])),
+        Solid("peg", make_polygon([[600, 100], [610, 100], [610, 110], [600, 110]])))), 1e-4)
+    block = eroded_polygon(make_polygon([[0, 0], [70, 0], [70, 150], [0, 150]]), 1e-4)
+    part = block.parts[0]
+    assert _strictly_convex(part) and block.convex == (True,)
+    assert eroded_polygon(make_polygon([[0, 0], [20, 0], [20, 20], [10, 20], [10, 10], [0, 10]]), 0.1).convex == (False,)
+    assert not _strictly_convex(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [2.0, 1.0]]))
+    assert not _strictly_convex(np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 0.5], [2.0, 2.0], [0.0, 2.0]]))
+    rng = np.random.default_rng(6)
+    poses = np.column_stack([rng.uniform(-250, 650, 3000), rng.uniform(-100, 150, 3000), rng.uniform(-4, 4, 3000)])
+    poses = np.concatenate([poses, [[0.0, 0.0, 0.0], [575.0, 50.0, 0.0]]])
+    placed = transform_points(poses, np.broadcast_to(part, (poses.shape[0],) + part.shape))
+    outside = ~shapely.intersects_xy(target.geometry, placed[..., 0].ravel(), placed[..., 1].ravel()
+                                     ).reshape(placed.shape[:2]).any(axis=1)
+    placed = placed[outside]
+    hit, decided = _convex_vs_target(placed, target)
+    want = shapely.intersects(target.geometry, shapely.polygons(placed))
+    np.testing.assert_array_equal(hit[decided], want[decided])
+    assert not np.any(hit & ~decided)
+    assert decided.mean() > 0.99 and want[decided].sum() > 50 and (~want[decided]).sum() > 50
+    # the pose resting in the slot's corner, 2e-4 mm clear, is decided a miss; the part
+    # around the peg (a target part inside it) a hit
+    assert list(zip(hit[-2:], decided[-2:])) == [(False, True), (True, True)]
+    # a triangle touching a square's corner with an edge (exactly) is left to GEOS
+    square = eroded_polygon(make_polygon([[0, 0], [1, 0], [1, 1], [0, 1]]), 0.0)
+    hit, decided = _convex_vs_target(np.array([[[0.0, 2.0], [2.0, 0.0], [3.0, 3.0]]]), square)
+    assert not decided[0] and not hit[0]

@@ -273,3 +273,28 @@ def test_enumeration_finds_flush_states_of_a_tilted_table() -> None:
     start, goal = motion.compose(TASK1[0]), motion.compose(TASK1[1])
     states = enumerate_contact_states(w, workspace_for_task(w, start, goal))
     assert [s.name for s in states] == ["l1-e1", "l2-e1", "l3-e1", "l4-e1", "v1-e1", "v2-e1", "v3-e1", "v4-e1"]
+
+
+@pytest.mark.parametrize("tol", [0.1, 1e-4, 2.0])
+def test_sparse_masks_equal_the_dense_frame(tol: float) -> None:
+    """principal_contact_masks tests only the (pose, edge) pairs the object's bounding disk
+    comes near (contacts._masks): the same masks as the dense frame, at contact poses (one,
+    two, edge-edge, on the lips), near them and anywhere, with a concave object too."""
+    from geometry.contacts import _frame, _masks
+
+    rng = np.random.default_rng(5)
+    notched = [[0, 0], [70, 0], [70, 150], [35, 150], [35, 100], [0, 100]]
+    for obj in (BLOCK, notched):
+        w = make_world(SLOT, [[520, -50], [620, -50], [620, 40], [520, 40]], obj=obj)  # two solids
+        ws = workspace_for_task(w, *TASK2)
+        sure = np.array([p.as_array() for sw in enumerate_contact_states(w, ws, max_contacts=3)
+                         for p in sw.witnesses])
+        poses = np.concatenate([
+            sure, sure + rng.normal(0.0, 0.05, sure.shape) * [1.0, 1.0, 1e-3],
+            np.column_stack([rng.uniform(ws.xmin, ws.xmax, 500), rng.uniform(ws.ymin, ws.ymax, 500),
+                             rng.uniform(-4.0, 4.0, 500)]),
+            [[np.nan, 0.0, 0.0]]])
+        dense, sparse = _frame(w, poses, tol).masks, _masks(w, poses, tol)
+        assert dense.counts.sum() > len(sure) // 2
+        for kind in ("vertex_edge", "edge_vertex", "edge_edge"):
+            np.testing.assert_array_equal(getattr(sparse, kind), getattr(dense, kind))

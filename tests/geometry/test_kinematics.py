@@ -151,3 +151,32 @@ def test_a_two_contact_speed_bound_from_a_near_singular_start_does_not_blow_up_t
     moved = [np.max(np.linalg.norm(verts.transformed(*q) - verts.transformed(*p), axis=1))
              for p, q in zip(scared.poses(grid[:-1]), scared.poses(grid[1:]))]
     assert max(moved) <= 1.0 + 1e-9
+
+
+def test_kept_contacts_of_several_motions_hold_as_one_at_a_time(slot: World) -> None:
+    """kinematics._kept_hold_rows (the sweeps' batched test): row for row the conjunction
+    of kept_contact_holds of each row's contacts, for vertex-edge and edge-vertex
+    contacts, motions keeping none, one or two, empty blocks, inside and outside the
+    features."""
+    from geometry.kinematics import _kept_hold_rows
+
+    rng = np.random.default_rng(2)
+    ve = [Contact(ContactKind.VERTEX_EDGE, i, j) for i in range(4) for j in range(slot.environment.m)]
+    ev = [Contact(ContactKind.EDGE_VERTEX, i, k) for i in range(4) for k in range(slot.environment.m)]
+    kept = [(), (ve[3],), (ev[5],), (ve[6], ev[9]), (ev[1], ve[12]), (ve[20],), (ev[30], ev[2])]
+    sizes = [5, 40, 0, 30, 25, 1, 33]
+    poses = np.column_stack([rng.uniform(-100, 400, sum(sizes)), rng.uniform(-60, 200, sum(sizes)),
+                             rng.uniform(-4, 4, sum(sizes))])
+    got = _kept_hold_rows(slot, kept, sizes, poses)
+    want, at = [], 0
+    for contacts, n in zip(kept, sizes):
+        ok = np.ones(n, dtype=bool)
+        for c in contacts:
+            ok &= kept_contact_holds(slot, c, poses[at:at + n])
+        want.append(ok)
+        at += n
+    want = np.concatenate(want)
+    assert 0 < want.sum() < want.size
+    np.testing.assert_array_equal(got, want)
+    with pytest.raises(ValueError):
+        _kept_hold_rows(slot, [(Contact(ContactKind.EDGE_EDGE, 0, 0),)], [1], poses[:1])

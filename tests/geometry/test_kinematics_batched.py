@@ -264,3 +264,36 @@ def test_a_grid_computed_in_part_starts_as_the_whole_grid(slot: World, step_mm: 
             s, p = g.whole()
             assert g.complete and np.array_equal(s, whole) and not g.more(s.size)
     assert parts  # some grids were known in part only
+
+
+def test_poses_of_several_motions_are_each_motions_poses(slot: World) -> None:
+    """kinematics._poses_many (the sweeps' refinements and grids place every motion of a
+    batch at once): bit for bit Motion.poses of each, for every kind of motion, two-contact
+    ones with both kinds of kept contact and through a singularity (NaN rows), empty and
+    scalar parameters."""
+    rng = np.random.default_rng(8)
+    motions = [m for m, _ in _motions(slot)] + [_through_a_singularity(1), _through_a_singularity(-1)]
+    motions += [_through_a_singularity(1)]  # vertex-edge and edge-vertex kept
+    params = [rng.uniform(-0.5, 4.0, int(rng.integers(0, 40))) for _ in motions]
+    params[3], params[-1] = np.zeros(0), 0.7
+    params[-3] = np.append(np.linspace(1.4, 1.75, 30), math.pi / 2)  # the lines parallel at 90 degrees
+    got = K._poses_many(motions, params)
+    assert len(got) == len(motions)
+    for m, x, p in zip(motions, params, got):
+        np.testing.assert_array_equal(p, m.poses(x))
+    assert any(np.isnan(p).any() for p in got)
+    assert K._poses_many([], []) == []
+
+
+def test_linspaces_are_numpy_linspace_of_each_interval() -> None:
+    """kinematics._linspaces (the multisection's points of every interval at once): bit
+    for bit np.linspace of each, zero-length and denormal intervals included."""
+    rng = np.random.default_rng(9)
+    lo = rng.uniform(-5, 5, 50) * 10.0 ** rng.integers(-8, 4, 50)
+    hi = lo + rng.uniform(0, 3, 50) * 10.0 ** rng.integers(-12, 2, 50)
+    for num in (66, 2, 7, 1):
+        got = K._linspaces(lo, hi, num)
+        assert np.array_equal(got, np.array([np.linspace(a, b, num) for a, b in zip(lo, hi)]))
+    lo2, hi2 = np.array([0.0, 1.0, 5e-324]), np.array([1.0, 1.0, 1e-323])  # a zero and a denormal step
+    assert np.array_equal(K._linspaces(lo2, hi2, 66), np.array([np.linspace(a, b, 66) for a, b in zip(lo2, hi2)]))
+    assert K._linspaces([], [], 66).shape == (0, 66)

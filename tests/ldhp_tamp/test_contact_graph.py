@@ -382,3 +382,20 @@ def test_a_notched_polygon_lying_in_the_corner_is_a_three_contact_state(domain) 
     tr = admissible_transitions(ctx, domain.info, REGISTRY)
     assert (S("v1-e1+v2-e8"), corner) in tr["biplanar-slide"]
     assert (corner, ctx.goal_state) in tr["push"]
+
+
+def test_point_contacts_are_memoised_per_pose(task2) -> None:
+    """move_object._point_contacts_at: _point_contacts at the pose, computed once per pose
+    and context (the push and biplanar-slide families of a witness share it)."""
+    from dataclasses import replace
+
+    from ldhp_tamp.primitives import move_object as mo
+
+    sc, ctx = task2
+    ctx = replace(ctx, memo={})
+    poses = [p for w in ctx.witnesses[:12] for p in w.witnesses[:2]]
+    for p in poses:
+        want = mo._point_contacts(sc.world, p)
+        assert mo._point_contacts_at(ctx, p) == want and want
+        ctx.memo[("point-contacts", p)] = ("sentinel",)
+        assert mo._point_contacts_at(ctx, p) == ["sentinel"]  # the memo answers
