@@ -193,6 +193,8 @@ def alternative_motions(points: ArrayLike, normals: ArrayLike, mu: ArrayLike, pr
     count = live.sum(axis=1)
     if (count > MAX_CONTACTS).any():
         raise GeometryError(f"forward: at most {MAX_CONTACTS} contacts per waypoint, got {int(count.max())}")
+    if c == 0:  # no contact: no equation fixes a twist
+        return ForwardCheck(np.zeros(b, dtype=bool), np.zeros((b, 3)), np.zeros((b, 0), dtype=np.int8))
     # contacts present first, padding after
     order = np.argsort(~live, axis=1, kind="stable")[:, :MAX_CONTACTS]
     k = min(c, MAX_CONTACTS)

@@ -295,3 +295,13 @@ def test_the_other_motions_are_the_dense_least_squares_answer(count: int) -> Non
     want = _alternatives_by_dense_least_squares(pts, nrm, mu, live, w, com, 22.0, plan)
     assert got.tolist() == want.tolist()
     assert 0 < got.sum() < b
+
+
+@pytest.mark.parametrize("b", [0, 2])
+def test_no_contact_allows_no_other_motion_and_no_waypoint_is_fine(b: int) -> None:
+    """Empty inputs: no contact column (nothing fixes a twist) or no waypoint."""
+    for c in (0, 3):
+        chk = alternative_motions(np.zeros((b, c, 2)), np.tile([0.0, 1.0], (b, c, 1)), np.zeros((b, c)),
+                                  np.ones((b, c), bool), np.zeros((b, c, 2)), np.zeros((b, 2)), 10.0, np.zeros((b, 3)))
+        assert chk.ambiguous.shape == (b,) and not chk.ambiguous.any()
+        assert chk.twist.shape == (b, 3) and chk.modes.shape == (b, c)
