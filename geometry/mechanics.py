@@ -643,6 +643,8 @@ def wrench_generators(contacts: Contacts, com: ArrayLike, length_scale: float | 
     penetrating : ndarray of bool, shape (B,)
     """
     c, il = _com_and_scale(com, length_scale, contacts.batch)
+    if contacts.batch == 0:
+        return np.zeros((0, 2 * contacts.count, 3)), np.zeros(0, dtype=bool)
     (X, Y, Z), pen = _generators_chunk(contacts, slice(None), c, il)
     K, B = len(X), contacts.batch
     out = np.zeros((B, K, 3))

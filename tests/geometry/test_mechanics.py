@@ -930,3 +930,12 @@ def test_pressed_feasible_decides_as_the_pressed_lp() -> None:
                          pressed=force[:, None]).feasible
     assert fast.any() and (~fast).any()
     assert (fast == lp).all()
+
+
+def test_an_empty_batch_has_no_generators() -> None:
+    from geometry.mechanics import ContactMode, Contacts, wrench_generators
+
+    c = Contacts.make(np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2)), ContactMode.STICKING)
+    for com in (np.zeros(2), np.zeros((0, 2))):
+        gens, pen = wrench_generators(c, com, 10.0)
+        assert gens.shape == (0, 4, 3) and pen.shape == (0,)
