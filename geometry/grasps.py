@@ -256,6 +256,27 @@ class GraspSet:
         memo[0], memo[1] = world, out
         return out
 
+    @cached_property
+    def _finger_rows(self) -> tuple[FloatArray, FloatArray, NDArray[np.int8]]:
+        """(G, 2, 2) contacts and (G, 2, 2) normals with NaN as 0, and (G, 2) the finger
+        contacts' modes (STICKING where touching, else ABSENT): the per-grasp part of every
+        (grasp, sample) instance of :func:`motion_conditioned`, computed once per set."""
+        modes = np.where(self.touching, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT).astype(np.int8)
+        return _ro(np.nan_to_num(self.contact)), _ro(np.nan_to_num(self.normal)), _ro(modes)
+
+    @cached_property
+    def _finger_mu_memo(self) -> list[Any]:
+        # [world, table]: contact_mu of the last world asked with NaN as 0
+        return [None, None]
+
+    def _finger_mu(self, world: World) -> FloatArray:
+        """(G, 2) :meth:`contact_mu` with NaN (no contact) as 0."""
+        memo = self._finger_mu_memo
+        if memo[0] is not world:
+            memo[1] = _ro(np.nan_to_num(self.contact_mu(world)))
+            memo[0] = world
+        return memo[1]
+
     def _contact_mu(self, world: World) -> FloatArray:
         n = self.n_object
         fr = world.friction
@@ -1258,43 +1279,69 @@ def _corner_separations(world: World, path: FloatArray, verts: FloatArray, pts: 
 
 
 def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray, env: _EnvContacts,
-               samples: IntArray) -> tuple[mechanics.Contacts, mechanics.Contacts, FloatArray]:
-    """Contacts of every (grasp, sample) pair, grasp-major: the finger contacts (B, 2) and
-    all contacts (B, C + 2), and the world COM (B, 2). Finger contacts move with the
-    object, so they are STICKING; a finger that does not touch is ABSENT."""
+               samples: IntArray, *, with_fingers: bool = False
+               ) -> tuple[mechanics.Contacts | None, mechanics.Contacts, FloatArray]:
+    """Contacts of every (grasp, sample) pair, grasp-major: all contacts (B, C + 2), the
+    environment's then the two fingers', the world COM (B, 2) and, if ``with_fingers``,
+    the finger contacts alone (B, 2; else None). Finger contacts move with the object, so
+    they are STICKING; a finger that does not touch is ABSENT.
+
+    The arrays are written in place into one buffer per field (no stacking, broadcasting
+    or concatenation of copies); each element is computed by the same floating-point
+    operations, in the same order, as ``c qx - s qy + x`` (a normal: that, less ``x``)."""
     a, k = rows.size, samples.size
+    b = a * k
     p = path[samples]
     c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-
-    def place(q: FloatArray) -> FloatArray:  # object-frame (A, F, 2) -> world (A, K, F, 2)
-        x = c[None, :, None] * q[:, None, :, 0] - s[None, :, None] * q[:, None, :, 1] + p[None, :, None, 0]
-        y = s[None, :, None] * q[:, None, :, 0] + c[None, :, None] * q[:, None, :, 1] + p[None, :, None, 1]
-        return np.stack([x, y], axis=-1)
-
-    touch = grasps.touching[rows]
-    fp = place(np.nan_to_num(grasps.contact[rows]))
-    fn = place(np.nan_to_num(grasps.normal[rows])) - p[None, :, None, :2]
-    fmu = np.broadcast_to(np.nan_to_num(grasps.contact_mu(world)[rows])[:, None, :], (a, k, 2))
-    fmode = np.broadcast_to(np.where(touch, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
-                            .astype(np.int8)[:, None, :], (a, k, 2))
-    b = a * k
-    fingers = mechanics.Contacts.trusted(fp.reshape(b, 2, 2), fn.reshape(b, 2, 2), fmu.reshape(b, 2),
-                                         fmode.reshape(b, 2))
     ce = env.points.shape[1]
-
-    def env_rep(x: np.ndarray) -> np.ndarray:
-        return np.broadcast_to(x[samples][None], (a,) + x[samples].shape).reshape((b,) + x.shape[1:])
-
-    allc = mechanics.Contacts.trusted(
-        np.concatenate([env_rep(env.points), fingers.points], axis=1),
-        np.concatenate([env_rep(env.normals), fingers.normals], axis=1),
-        np.concatenate([env_rep(env.mu), fingers.mu], axis=1),
-        np.concatenate([env_rep(env.modes), fingers.modes], axis=1),
-        np.concatenate([env_rep(env.slide_dirs), np.zeros((b, 2, 2))], axis=1),
-    )
-    assert allc.count == ce + 2
-    com = np.broadcast_to(place(world.object.com[None, None, :])[0, :, 0][None], (a, k, 2)).reshape(b, 2)
-    return fingers, allc, com
+    n_all = ce + 2
+    q0, n0, modes0 = grasps._finger_rows
+    mu0 = grasps._finger_mu(world)
+    points = np.empty((a, k, n_all, 2))
+    normals = np.empty((a, k, n_all, 2))
+    mu = np.empty((a, k, n_all))
+    modes = np.empty((a, k, n_all), dtype=np.int8)
+    slide = np.zeros((a, k, n_all, 2))
+    points[:, :, :ce] = env.points[samples]
+    normals[:, :, :ce] = env.normals[samples]
+    mu[:, :, :ce] = env.mu[samples]
+    modes[:, :, :ce] = env.modes[samples]
+    slide[:, :, :ce] = env.slide_dirs[samples]
+    mu[:, :, ce:] = mu0[rows][:, None, :]
+    modes[:, :, ce:] = modes0[rows][:, None, :]
+    ck, sk = c[None, :, None], s[None, :, None]
+    px, py = p[None, :, None, 0], p[None, :, None, 1]
+    t1 = np.empty((a, k, 2))
+    t2 = np.empty((a, k, 2))
+    for q, out, normal in ((q0[rows], points, False), (n0[rows], normals, True)):
+        qx, qy = q[:, None, :, 0], q[:, None, :, 1]
+        for ax, (first, second, sub, shift) in enumerate(((ck, sk, True, px), (sk, ck, False, py))):
+            np.multiply(first, qx, out=t1)
+            np.multiply(second, qy, out=t2)
+            if sub:  # x = c qx - s qy + px
+                np.subtract(t1, t2, out=t1)
+            else:  # y = s qx + c qy + py
+                np.add(t1, t2, out=t1)
+            dst = out[:, :, ce:, ax]
+            if normal:
+                np.add(t1, shift, out=t1)
+                np.subtract(t1, shift, out=dst)
+            else:
+                np.add(t1, shift, out=dst)
+    points, normals = points.reshape(b, n_all, 2), normals.reshape(b, n_all, 2)
+    mu, modes, slide = mu.reshape(b, n_all), modes.reshape(b, n_all), slide.reshape(b, n_all, 2)
+    allc = mechanics.Contacts.trusted(points, normals, mu, modes, slide)
+    fingers = None
+    if with_fingers:
+        fingers = mechanics.Contacts.trusted(np.ascontiguousarray(points[:, ce:]), np.ascontiguousarray(normals[:, ce:]),
+                                             np.ascontiguousarray(mu[:, ce:]), np.ascontiguousarray(modes[:, ce:]))
+    com0 = world.object.com
+    cx = c * com0[0] - s * com0[1] + p[:, 0]
+    cy = s * com0[0] + c * com0[1] + p[:, 1]
+    com = np.empty((a, k, 2))
+    com[:, :, 0] = cx
+    com[:, :, 1] = cy
+    return fingers, allc, com.reshape(b, 2)
 
 
 def _spread_order(n: int) -> IntArray:
@@ -1746,7 +1793,8 @@ def _rating(world: World, grasps: GraspSet, p: FloatArray, alive: IntArray, env:
     order = _spread_order(p.shape[0])
     at = np.sort(order[:max(1, opts.alpha_samples)])
     length = world.object.length_scale
-    fingers, allc, com = _instances(world, grasps, alive, p, env, at)
+    fingers, allc, com = _instances(world, grasps, alive, p, env, at, with_fingers=True)
+    assert fingers is not None
     closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)
     ang = mechanics.reaction_angle_batch(allc, com, length, iterations=opts.angle_iterations)
     ang = ang.reshape(alive.size, at.size)
