@@ -277,6 +277,28 @@ class GraspSet:
             memo[0] = world
         return memo[1]
 
+    @cached_property
+    def _classes_memo(self) -> list[Any]:
+        # [world, ids]: _contact_classes of the last world asked
+        return [None, None]
+
+    def _contact_classes(self, world: World) -> IntArray:
+        """(G,) ids of the grasps whose finger contacts are the same bit for bit (points and
+        normals in the object frame, friction in ``world``, which fingers touch): their
+        (grasp, sample) instances of :func:`motion_conditioned` are the same arrays, so the
+        quasi-static tests are decided once per class (many grasps share their contacts and
+        differ only by the gripper's pose or opening)."""
+        memo = self._classes_memo
+        if memo[0] is not world:
+            q, n, modes = self._finger_rows
+            mu = self._finger_mu(world)
+            g = len(self)
+            keys = np.concatenate([q.reshape(g, -1).view(np.int64), n.reshape(g, -1).view(np.int64),
+                                   mu.view(np.int64), modes.astype(np.int64)], axis=1)
+            memo[1] = _ro(row_groups(keys)[0])
+            memo[0] = world
+        return memo[1]
+
     def _contact_mu(self, world: World) -> FloatArray:
         n = self.n_object
         fr = world.friction
@@ -1344,6 +1366,15 @@ def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray,
     return fingers, allc, com.reshape(b, 2)
 
 
+def _contact_classes(world: World, grasps: GraspSet, rows: IntArray) -> tuple[IntArray, IntArray]:
+    """``rows`` by their finger contacts (:meth:`GraspSet._contact_classes`): one
+    representative row per class (its first in ``rows``) and, per row, the index of its
+    class's representative. The instances of a class are the same arrays bit for bit, so
+    a per-instance test of the representatives, indexed by the second, answers for all."""
+    _, first, of = np.unique(grasps._contact_classes(world)[rows], return_index=True, return_inverse=True)
+    return rows[first], of.reshape(-1)
+
+
 def _spread_order(n: int) -> IntArray:
     """0..n-1 ordered coarse to fine: the two ends, the middle, the quarters, ... (each
     index once), so that the first chunks of a path's samples cover all of it."""
@@ -1453,8 +1484,9 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         # The quasi-static test first: it is ~10x cheaper per instance than the polyline
         # collision test and rejects most candidates.
         assert env is not None
-        _, allc, com = _instances(world, grasps, alive, p, env, samples)
-        ok = mechanics.feasible_batch(allc, com, length).reshape(alive.size, samples.size)
+        rep, of = _contact_classes(world, grasps, alive)  # the same contacts, the same answer
+        _, allc, com = _instances(world, grasps, rep, p, env, samples)
+        ok = mechanics.feasible_batch(allc, com, length).reshape(rep.size, samples.size)[of]
         checks += int(ok.size)
         bad = ~ok.all(axis=1)
         rejected.append(alive[bad])
@@ -1494,10 +1526,12 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     press = None
     idle = _leaves_it_still(world, grasps, p, alive)
     if env is not None:
-        idle |= _falls_away(world, grasps, p, alive, env)
+        rep, of = _contact_classes(world, grasps, alive)  # both answer per instance: per class
+        idle |= _falls_away(world, grasps, p, rep, env)[of]
     if idle.any():
         assert env is not None
-        force = press_forces(world, grasps, p, alive[idle], env)
+        rep, of = _contact_classes(world, grasps, alive[idle])
+        force = press_forces(world, grasps, p, rep, env)[of]
         served = np.isfinite(force)
         rejected.append(alive[idle][~served])
         rejected_at.append(np.full(int((~served).sum()), -1, dtype=np.int64))  # the path as a whole
@@ -1793,11 +1827,12 @@ def _rating(world: World, grasps: GraspSet, p: FloatArray, alive: IntArray, env:
     order = _spread_order(p.shape[0])
     at = np.sort(order[:max(1, opts.alpha_samples)])
     length = world.object.length_scale
-    fingers, allc, com = _instances(world, grasps, alive, p, env, at, with_fingers=True)
+    rep, of = _contact_classes(world, grasps, alive)  # the same contacts, the same rating
+    fingers, allc, com = _instances(world, grasps, rep, p, env, at, with_fingers=True)
     assert fingers is not None
-    closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)
+    closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)[of]
     ang = mechanics.reaction_angle_batch(allc, com, length, iterations=opts.angle_iterations)
-    ang = ang.reshape(alive.size, at.size)
+    ang = ang.reshape(rep.size, at.size)[of]
     fin = np.isfinite(ang)  # all of them: the samples passed the same feasibility test
     alpha = np.where(fin, ang, 0.0).sum(axis=1) / np.maximum(fin.sum(axis=1), 1)
     quality = opts.w1 * (~closure).astype(float) + opts.w2 * alpha

@@ -1014,3 +1014,26 @@ def test_finger_rows_and_mu_are_kept_per_set_and_world() -> None:
     assert gs._finger_mu(world) is mu and np.array_equal(mu, np.nan_to_num(gs.contact_mu(world)))
     other = World(world.object, world.environment, world.gripper, Friction(0.3, 0.2))
     assert np.allclose(gs._finger_mu(other)[gs.touching], 0.2)
+
+
+def test_contact_classes_group_grasps_with_the_same_instances() -> None:
+    """Grasps of one class have the same finger contacts bit for bit (so the same
+    (grasp, sample) instances); the representatives are each class's first row."""
+    world, gs = grasp_set("polyline-palm")
+    ids = gs._contact_classes(world)
+    assert gs._contact_classes(world) is ids and ids.shape == (len(gs),)
+    q, n, modes = gs._finger_rows
+    mu = gs._finger_mu(world)
+    assert np.unique(ids).size < len(gs)  # openings share contacts
+    for cls in np.unique(ids)[:50]:
+        rows = np.flatnonzero(ids == cls)
+        for x in (q, n, mu, modes):
+            assert all(x[r].tobytes() == x[rows[0]].tobytes() for r in rows)
+    rng = np.random.default_rng(2)
+    rows = rng.choice(np.arange(1, len(gs)), 300, replace=False)
+    rep, of = grasps_module._contact_classes(world, gs, rows)
+    assert np.array_equal(ids[rep[of]], ids[rows]) and np.unique(ids[rep]).size == rep.size
+    first = {}
+    for r in rows:
+        first.setdefault(ids[r], r)
+    assert sorted(first.values()) == sorted(rep.tolist())
