@@ -1308,9 +1308,10 @@ def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray,
     the finger contacts alone (B, 2; else None). Finger contacts move with the object, so
     they are STICKING; a finger that does not touch is ABSENT.
 
-    The arrays are written in place into one buffer per field (no stacking, broadcasting
-    or concatenation of copies); each element is computed by the same floating-point
-    operations, in the same order, as ``c qx - s qy + x`` (a normal: that, less ``x``)."""
+    Each field is one buffer: every grasp's block is a copy of one (K, C + 2) template of
+    the samples' environment contacts, and the finger slots are computed sample-major, on
+    long contiguous runs of grasps, by the same floating-point operations in the same order
+    as ``c qx - s qy + x`` (a normal: that, less ``x``), then copied into place."""
     a, k = rows.size, samples.size
     b = a * k
     p = path[samples]
@@ -1319,37 +1320,33 @@ def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray,
     n_all = ce + 2
     q0, n0, modes0 = grasps._finger_rows
     mu0 = grasps._finger_mu(world)
-    points = np.empty((a, k, n_all, 2))
-    normals = np.empty((a, k, n_all, 2))
-    mu = np.empty((a, k, n_all))
-    modes = np.empty((a, k, n_all), dtype=np.int8)
-    slide = np.zeros((a, k, n_all, 2))
-    points[:, :, :ce] = env.points[samples]
-    normals[:, :, :ce] = env.normals[samples]
-    mu[:, :, :ce] = env.mu[samples]
-    modes[:, :, :ce] = env.modes[samples]
-    slide[:, :, :ce] = env.slide_dirs[samples]
+
+    def filled(field: np.ndarray, dtype: type = float) -> np.ndarray:  # (A, K, C + 2, ...) from the template
+        tmpl = np.zeros((k, n_all) + field.shape[2:], dtype=dtype)
+        tmpl[:, :ce] = field[samples]
+        out = np.empty((a,) + tmpl.shape, dtype=dtype)
+        out[...] = tmpl
+        return out
+
+    points, normals, slide = filled(env.points), filled(env.normals), filled(env.slide_dirs)
+    mu, modes = filled(env.mu), filled(env.modes, np.int8)
     mu[:, :, ce:] = mu0[rows][:, None, :]
     modes[:, :, ce:] = modes0[rows][:, None, :]
-    ck, sk = c[None, :, None], s[None, :, None]
-    px, py = p[None, :, None, 0], p[None, :, None, 1]
-    t1 = np.empty((a, k, 2))
-    t2 = np.empty((a, k, 2))
+    ck, sk = c[:, None, None], s[:, None, None]  # (K, 1, 1) against (1, A, 2) contiguous grasps
+    px, py = p[:, 0, None, None], p[:, 1, None, None]
     for q, out, normal in ((q0[rows], points, False), (n0[rows], normals, True)):
-        qx, qy = q[:, None, :, 0], q[:, None, :, 1]
+        qx, qy = np.ascontiguousarray(q[:, :, 0])[None], np.ascontiguousarray(q[:, :, 1])[None]
         for ax, (first, second, sub, shift) in enumerate(((ck, sk, True, px), (sk, ck, False, py))):
-            np.multiply(first, qx, out=t1)
-            np.multiply(second, qy, out=t2)
+            t1 = first * qx  # (K, A, 2)
+            t2 = second * qy
             if sub:  # x = c qx - s qy + px
                 np.subtract(t1, t2, out=t1)
             else:  # y = s qx + c qy + py
                 np.add(t1, t2, out=t1)
-            dst = out[:, :, ce:, ax]
+            np.add(t1, shift, out=t1)
             if normal:
-                np.add(t1, shift, out=t1)
-                np.subtract(t1, shift, out=dst)
-            else:
-                np.add(t1, shift, out=dst)
+                np.subtract(t1, shift, out=t1)
+            out[:, :, ce:, ax] = t1.transpose(1, 0, 2)
     points, normals = points.reshape(b, n_all, 2), normals.reshape(b, n_all, 2)
     mu, modes, slide = mu.reshape(b, n_all), modes.reshape(b, n_all), slide.reshape(b, n_all, 2)
     allc = mechanics.Contacts.trusted(points, normals, mu, modes, slide)
