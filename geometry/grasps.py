@@ -256,6 +256,49 @@ class GraspSet:
         memo[0], memo[1] = world, out
         return out
 
+    @cached_property
+    def _finger_rows(self) -> tuple[FloatArray, FloatArray, NDArray[np.int8]]:
+        """(G, 2, 2) contacts and (G, 2, 2) normals with NaN as 0, and (G, 2) the finger
+        contacts' modes (STICKING where touching, else ABSENT): the per-grasp part of every
+        (grasp, sample) instance of :func:`motion_conditioned`, computed once per set."""
+        modes = np.where(self.touching, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT).astype(np.int8)
+        return _ro(np.nan_to_num(self.contact)), _ro(np.nan_to_num(self.normal)), _ro(modes)
+
+    @cached_property
+    def _finger_mu_memo(self) -> list[Any]:
+        # [world, table]: contact_mu of the last world asked with NaN as 0
+        return [None, None]
+
+    def _finger_mu(self, world: World) -> FloatArray:
+        """(G, 2) :meth:`contact_mu` with NaN (no contact) as 0."""
+        memo = self._finger_mu_memo
+        if memo[0] is not world:
+            memo[1] = _ro(np.nan_to_num(self.contact_mu(world)))
+            memo[0] = world
+        return memo[1]
+
+    @cached_property
+    def _classes_memo(self) -> list[Any]:
+        # [world, ids]: _contact_classes of the last world asked
+        return [None, None]
+
+    def _contact_classes(self, world: World) -> IntArray:
+        """(G,) ids of the grasps whose finger contacts are the same bit for bit (points and
+        normals in the object frame, friction in ``world``, which fingers touch): their
+        (grasp, sample) instances of :func:`motion_conditioned` are the same arrays, so the
+        quasi-static tests are decided once per class (many grasps share their contacts and
+        differ only by the gripper's pose or opening)."""
+        memo = self._classes_memo
+        if memo[0] is not world:
+            q, n, modes = self._finger_rows
+            mu = self._finger_mu(world)
+            g = len(self)
+            keys = np.concatenate([q.reshape(g, -1).view(np.int64), n.reshape(g, -1).view(np.int64),
+                                   mu.view(np.int64), modes.astype(np.int64)], axis=1)
+            memo[1] = _ro(row_groups(keys)[0])
+            memo[0] = world
+        return memo[1]
+
     def _contact_mu(self, world: World) -> FloatArray:
         n = self.n_object
         fr = world.friction
@@ -1258,43 +1301,75 @@ def _corner_separations(world: World, path: FloatArray, verts: FloatArray, pts: 
 
 
 def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray, env: _EnvContacts,
-               samples: IntArray) -> tuple[mechanics.Contacts, mechanics.Contacts, FloatArray]:
-    """Contacts of every (grasp, sample) pair, grasp-major: the finger contacts (B, 2) and
-    all contacts (B, C + 2), and the world COM (B, 2). Finger contacts move with the
-    object, so they are STICKING; a finger that does not touch is ABSENT."""
+               samples: IntArray, *, with_fingers: bool = False
+               ) -> tuple[mechanics.Contacts | None, mechanics.Contacts, FloatArray]:
+    """Contacts of every (grasp, sample) pair, grasp-major: all contacts (B, C + 2), the
+    environment's then the two fingers', the world COM (B, 2) and, if ``with_fingers``,
+    the finger contacts alone (B, 2; else None). Finger contacts move with the object, so
+    they are STICKING; a finger that does not touch is ABSENT.
+
+    Each field is one buffer: every grasp's block is a copy of one (K, C + 2) template of
+    the samples' environment contacts, and the finger slots are computed sample-major, on
+    long contiguous runs of grasps, by the same floating-point operations in the same order
+    as ``c qx - s qy + x`` (a normal: that, less ``x``), then copied into place."""
     a, k = rows.size, samples.size
+    b = a * k
     p = path[samples]
     c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-
-    def place(q: FloatArray) -> FloatArray:  # object-frame (A, F, 2) -> world (A, K, F, 2)
-        x = c[None, :, None] * q[:, None, :, 0] - s[None, :, None] * q[:, None, :, 1] + p[None, :, None, 0]
-        y = s[None, :, None] * q[:, None, :, 0] + c[None, :, None] * q[:, None, :, 1] + p[None, :, None, 1]
-        return np.stack([x, y], axis=-1)
-
-    touch = grasps.touching[rows]
-    fp = place(np.nan_to_num(grasps.contact[rows]))
-    fn = place(np.nan_to_num(grasps.normal[rows])) - p[None, :, None, :2]
-    fmu = np.broadcast_to(np.nan_to_num(grasps.contact_mu(world)[rows])[:, None, :], (a, k, 2))
-    fmode = np.broadcast_to(np.where(touch, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
-                            .astype(np.int8)[:, None, :], (a, k, 2))
-    b = a * k
-    fingers = mechanics.Contacts.trusted(fp.reshape(b, 2, 2), fn.reshape(b, 2, 2), fmu.reshape(b, 2),
-                                         fmode.reshape(b, 2))
     ce = env.points.shape[1]
+    n_all = ce + 2
+    q0, n0, modes0 = grasps._finger_rows
+    mu0 = grasps._finger_mu(world)
 
-    def env_rep(x: np.ndarray) -> np.ndarray:
-        return np.broadcast_to(x[samples][None], (a,) + x[samples].shape).reshape((b,) + x.shape[1:])
+    def filled(field: np.ndarray, dtype: type = float) -> np.ndarray:  # (A, K, C + 2, ...) from the template
+        tmpl = np.zeros((k, n_all) + field.shape[2:], dtype=dtype)
+        tmpl[:, :ce] = field[samples]
+        out = np.empty((a,) + tmpl.shape, dtype=dtype)
+        out[...] = tmpl
+        return out
 
-    allc = mechanics.Contacts.trusted(
-        np.concatenate([env_rep(env.points), fingers.points], axis=1),
-        np.concatenate([env_rep(env.normals), fingers.normals], axis=1),
-        np.concatenate([env_rep(env.mu), fingers.mu], axis=1),
-        np.concatenate([env_rep(env.modes), fingers.modes], axis=1),
-        np.concatenate([env_rep(env.slide_dirs), np.zeros((b, 2, 2))], axis=1),
-    )
-    assert allc.count == ce + 2
-    com = np.broadcast_to(place(world.object.com[None, None, :])[0, :, 0][None], (a, k, 2)).reshape(b, 2)
-    return fingers, allc, com
+    points, normals, slide = filled(env.points), filled(env.normals), filled(env.slide_dirs)
+    mu, modes = filled(env.mu), filled(env.modes, np.int8)
+    mu[:, :, ce:] = mu0[rows][:, None, :]
+    modes[:, :, ce:] = modes0[rows][:, None, :]
+    ck, sk = c[:, None, None], s[:, None, None]  # (K, 1, 1) against (1, A, 2) contiguous grasps
+    px, py = p[:, 0, None, None], p[:, 1, None, None]
+    for q, out, normal in ((q0[rows], points, False), (n0[rows], normals, True)):
+        qx, qy = np.ascontiguousarray(q[:, :, 0])[None], np.ascontiguousarray(q[:, :, 1])[None]
+        for ax, (first, second, sub, shift) in enumerate(((ck, sk, True, px), (sk, ck, False, py))):
+            t1 = first * qx  # (K, A, 2)
+            t2 = second * qy
+            if sub:  # x = c qx - s qy + px
+                np.subtract(t1, t2, out=t1)
+            else:  # y = s qx + c qy + py
+                np.add(t1, t2, out=t1)
+            np.add(t1, shift, out=t1)
+            if normal:
+                np.subtract(t1, shift, out=t1)
+            out[:, :, ce:, ax] = t1.transpose(1, 0, 2)
+    points, normals = points.reshape(b, n_all, 2), normals.reshape(b, n_all, 2)
+    mu, modes, slide = mu.reshape(b, n_all), modes.reshape(b, n_all), slide.reshape(b, n_all, 2)
+    allc = mechanics.Contacts.trusted(points, normals, mu, modes, slide)
+    fingers = None
+    if with_fingers:
+        fingers = mechanics.Contacts.trusted(np.ascontiguousarray(points[:, ce:]), np.ascontiguousarray(normals[:, ce:]),
+                                             np.ascontiguousarray(mu[:, ce:]), np.ascontiguousarray(modes[:, ce:]))
+    com0 = world.object.com
+    cx = c * com0[0] - s * com0[1] + p[:, 0]
+    cy = s * com0[0] + c * com0[1] + p[:, 1]
+    com = np.empty((a, k, 2))
+    com[:, :, 0] = cx
+    com[:, :, 1] = cy
+    return fingers, allc, com.reshape(b, 2)
+
+
+def _contact_classes(world: World, grasps: GraspSet, rows: IntArray) -> tuple[IntArray, IntArray]:
+    """``rows`` by their finger contacts (:meth:`GraspSet._contact_classes`): one
+    representative row per class (its first in ``rows``) and, per row, the index of its
+    class's representative. The instances of a class are the same arrays bit for bit, so
+    a per-instance test of the representatives, indexed by the second, answers for all."""
+    _, first, of = np.unique(grasps._contact_classes(world)[rows], return_index=True, return_inverse=True)
+    return rows[first], of.reshape(-1)
 
 
 def _spread_order(n: int) -> IntArray:
@@ -1406,8 +1481,9 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         # The quasi-static test first: it is ~10x cheaper per instance than the polyline
         # collision test and rejects most candidates.
         assert env is not None
-        _, allc, com = _instances(world, grasps, alive, p, env, samples)
-        ok = mechanics.feasible_batch(allc, com, length).reshape(alive.size, samples.size)
+        rep, of = _contact_classes(world, grasps, alive)  # the same contacts, the same answer
+        _, allc, com = _instances(world, grasps, rep, p, env, samples)
+        ok = mechanics.feasible_batch(allc, com, length).reshape(rep.size, samples.size)[of]
         checks += int(ok.size)
         bad = ~ok.all(axis=1)
         rejected.append(alive[bad])
@@ -1447,10 +1523,12 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     press = None
     idle = _leaves_it_still(world, grasps, p, alive)
     if env is not None:
-        idle |= _falls_away(world, grasps, p, alive, env)
+        rep, of = _contact_classes(world, grasps, alive)  # both answer per instance: per class
+        idle |= _falls_away(world, grasps, p, rep, env)[of]
     if idle.any():
         assert env is not None
-        force = press_forces(world, grasps, p, alive[idle], env)
+        rep, of = _contact_classes(world, grasps, alive[idle])
+        force = press_forces(world, grasps, p, rep, env)[of]
         served = np.isfinite(force)
         rejected.append(alive[idle][~served])
         rejected_at.append(np.full(int((~served).sum()), -1, dtype=np.int64))  # the path as a whole
@@ -1746,10 +1824,12 @@ def _rating(world: World, grasps: GraspSet, p: FloatArray, alive: IntArray, env:
     order = _spread_order(p.shape[0])
     at = np.sort(order[:max(1, opts.alpha_samples)])
     length = world.object.length_scale
-    fingers, allc, com = _instances(world, grasps, alive, p, env, at)
-    closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)
+    rep, of = _contact_classes(world, grasps, alive)  # the same contacts, the same rating
+    fingers, allc, com = _instances(world, grasps, rep, p, env, at, with_fingers=True)
+    assert fingers is not None
+    closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)[of]
     ang = mechanics.reaction_angle_batch(allc, com, length, iterations=opts.angle_iterations)
-    ang = ang.reshape(alive.size, at.size)
+    ang = ang.reshape(rep.size, at.size)[of]
     fin = np.isfinite(ang)  # all of them: the samples passed the same feasibility test
     alpha = np.where(fin, ang, 0.0).sum(axis=1) / np.maximum(fin.sum(axis=1), 1)
     quality = opts.w1 * (~closure).astype(float) + opts.w2 * alpha

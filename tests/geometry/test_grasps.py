@@ -940,3 +940,100 @@ def testrow_groups_are_numpys_unique_rows() -> None:
     assert (keys[first[inv]] == keys).all()
     empty_inv, empty_first = row_groups(np.zeros((0, 3), dtype=np.int64))
     assert empty_inv.size == 0 and empty_first.size == 0
+
+
+def _instances_reference(world: World, grasps: GraspSet, rows, path, env, samples):
+    """The (grasp, sample) instances as ``_instances`` built them before it wrote into
+    one buffer per field (stacked, broadcast and concatenated copies)."""
+    a, k = rows.size, samples.size
+    p = path[samples]
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+
+    def place(q):
+        x = c[None, :, None] * q[:, None, :, 0] - s[None, :, None] * q[:, None, :, 1] + p[None, :, None, 0]
+        y = s[None, :, None] * q[:, None, :, 0] + c[None, :, None] * q[:, None, :, 1] + p[None, :, None, 1]
+        return np.stack([x, y], axis=-1)
+
+    touch = grasps.touching[rows]
+    fp = place(np.nan_to_num(grasps.contact[rows]))
+    fn = place(np.nan_to_num(grasps.normal[rows])) - p[None, :, None, :2]
+    fmu = np.broadcast_to(np.nan_to_num(grasps.contact_mu(world)[rows])[:, None, :], (a, k, 2))
+    fmode = np.broadcast_to(np.where(touch, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
+                            .astype(np.int8)[:, None, :], (a, k, 2))
+    b = a * k
+    fingers = (fp.reshape(b, 2, 2), fn.reshape(b, 2, 2), fmu.reshape(b, 2), fmode.reshape(b, 2))
+
+    def env_rep(x):
+        return np.broadcast_to(x[samples][None], (a,) + x[samples].shape).reshape((b,) + x.shape[1:])
+
+    allc = (np.concatenate([env_rep(env.points), fingers[0]], axis=1),
+            np.concatenate([env_rep(env.normals), fingers[1]], axis=1),
+            np.concatenate([env_rep(env.mu), fingers[2]], axis=1),
+            np.concatenate([env_rep(env.modes), fingers[3]], axis=1),
+            np.concatenate([env_rep(env.slide_dirs), np.zeros((b, 2, 2))], axis=1))
+    com = np.broadcast_to(place(world.object.com[None, None, :])[0, :, 0][None], (a, k, 2)).reshape(b, 2)
+    return fingers, allc, com
+
+
+def _same_bits(x: np.ndarray, y: np.ndarray) -> bool:
+    return x.dtype == y.dtype and x.shape == y.shape and x.flags.c_contiguous and x.tobytes() == y.tobytes()
+
+
+@pytest.mark.parametrize("gripper", ["two-point-range", "polyline-palm"])
+def test_instances_are_bit_for_bit_the_stacked_ones(gripper: str) -> None:
+    """``_instances`` writes each field into one buffer: the same bits, dtypes, shapes and
+    (C-contiguous) layouts as the stacked and concatenated arrays it built before, for
+    rows that touch with one finger or two and samples in any order."""
+    world, gs = grasp_set(gripper)
+    path = tip_right(20.0, 1.0)
+    env = grasps_module._env_contacts(world, path, CONTACT_TOL)
+    rng = np.random.default_rng(5)
+    rows = np.sort(rng.choice(np.arange(1, len(gs)), 40, replace=False))
+    assert (gs.n_touching[rows] == 1).any() and (gs.n_touching[rows] == 2).any()
+    for samples in (np.array([0]), np.array([0, path.shape[0] - 1]), rng.permutation(path.shape[0])[:7]):
+        fingers, allc, com = grasps_module._instances(world, gs, rows, path, env, samples, with_fingers=True)
+        ref_f, ref_a, ref_com = _instances_reference(world, gs, rows, path, env, samples)
+        got_a = (allc.points, allc.normals, allc.mu, allc.modes, allc.slide_dirs)
+        assert all(_same_bits(x, y) for x, y in zip(got_a, ref_a))
+        assert all(_same_bits(x, y) for x, y in zip((fingers.points, fingers.normals, fingers.mu, fingers.modes), ref_f))
+        assert _same_bits(com, ref_com)
+        none, _, _ = grasps_module._instances(world, gs, rows, path, env, samples)
+        assert none is None
+
+
+def test_finger_rows_and_mu_are_kept_per_set_and_world() -> None:
+    """The per-grasp parts of the instances are computed once: NaN as 0, read-only, and
+    the friction table redone for another world."""
+    world = make_world(TwoPointGripper(R, (10.0, 150.0)), obj=PICK_BLOCK)
+    gs = enumerate_grasps(world, GraspOptions(samples_per_edge=10))
+    q, n, modes = gs._finger_rows
+    assert gs._finger_rows[0] is q and not q.flags.writeable
+    assert np.array_equal(q, np.nan_to_num(gs.contact)) and np.array_equal(n, np.nan_to_num(gs.normal))
+    assert np.array_equal(modes == mechanics.ContactMode.STICKING, gs.touching)
+    mu = gs._finger_mu(world)
+    assert gs._finger_mu(world) is mu and np.array_equal(mu, np.nan_to_num(gs.contact_mu(world)))
+    other = World(world.object, world.environment, world.gripper, Friction(0.3, 0.2))
+    assert np.allclose(gs._finger_mu(other)[gs.touching], 0.2)
+
+
+def test_contact_classes_group_grasps_with_the_same_instances() -> None:
+    """Grasps of one class have the same finger contacts bit for bit (so the same
+    (grasp, sample) instances); the representatives are each class's first row."""
+    world, gs = grasp_set("polyline-palm")
+    ids = gs._contact_classes(world)
+    assert gs._contact_classes(world) is ids and ids.shape == (len(gs),)
+    q, n, modes = gs._finger_rows
+    mu = gs._finger_mu(world)
+    assert np.unique(ids).size < len(gs)  # openings share contacts
+    for cls in np.unique(ids)[:50]:
+        rows = np.flatnonzero(ids == cls)
+        for x in (q, n, mu, modes):
+            assert all(x[r].tobytes() == x[rows[0]].tobytes() for r in rows)
+    rng = np.random.default_rng(2)
+    rows = rng.choice(np.arange(1, len(gs)), 300, replace=False)
+    rep, of = grasps_module._contact_classes(world, gs, rows)
+    assert np.array_equal(ids[rep[of]], ids[rows]) and np.unique(ids[rep]).size == rep.size
+    first = {}
+    for r in rows:
+        first.setdefault(ids[r], r)
+    assert sorted(first.values()) == sorted(rep.tolist())
