@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import enum
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from typing import Any
@@ -232,10 +233,22 @@ class GraspSet:
         return Pose.from_array(pose).apply(c)
 
     @cached_property
-    def _mu_memo(self) -> list[Any]:
-        # [world, table]: contact_mu of the last world asked (a solve asks with one world,
-        # thousands of times: each a pass over every grasp)
-        return [None, None]
+    def _world_memo(self) -> dict[str, Any]:
+        # what depends on the world, for the last world asked (a solve asks with one
+        # world, thousands of times: each a pass over every grasp)
+        return {"world": None}
+
+    def _per_world(self, world: World, key: str, compute: Callable[[], np.ndarray]) -> np.ndarray:
+        """``compute()`` (made read-only) for ``world``, memoised until another world is asked."""
+        memo = self._world_memo
+        if memo["world"] is not world:
+            memo.clear()
+            memo["world"] = world
+        if key not in memo:
+            out = compute()
+            out.setflags(write=False)
+            memo[key] = out
+        return memo[key]
 
     def contact_mu(self, world: World) -> FloatArray:
         """(G, 2) finger-object friction coefficient of each contact (NaN if none).
@@ -248,13 +261,7 @@ class GraspSet:
         contact at the vertex (plan rule 7), and a plan must not lean on friction that
         its judge does not grant (a cover 0.7 mm from a frictionless end face).
         """
-        memo = self._mu_memo
-        if memo[0] is world:
-            return memo[1]
-        out = self._contact_mu(world)
-        out.setflags(write=False)
-        memo[0], memo[1] = world, out
-        return out
+        return self._per_world(world, "contact_mu", lambda: self._contact_mu(world))
 
     @cached_property
     def _finger_rows(self) -> tuple[FloatArray, FloatArray, NDArray[np.int8]]:
@@ -264,23 +271,9 @@ class GraspSet:
         modes = np.where(self.touching, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT).astype(np.int8)
         return _ro(np.nan_to_num(self.contact)), _ro(np.nan_to_num(self.normal)), _ro(modes)
 
-    @cached_property
-    def _finger_mu_memo(self) -> list[Any]:
-        # [world, table]: contact_mu of the last world asked with NaN as 0
-        return [None, None]
-
     def _finger_mu(self, world: World) -> FloatArray:
         """(G, 2) :meth:`contact_mu` with NaN (no contact) as 0."""
-        memo = self._finger_mu_memo
-        if memo[0] is not world:
-            memo[1] = _ro(np.nan_to_num(self.contact_mu(world)))
-            memo[0] = world
-        return memo[1]
-
-    @cached_property
-    def _classes_memo(self) -> list[Any]:
-        # [world, ids]: _contact_classes of the last world asked
-        return [None, None]
+        return self._per_world(world, "finger_mu", lambda: np.nan_to_num(self.contact_mu(world)))
 
     def _contact_classes(self, world: World) -> IntArray:
         """(G,) ids of the grasps whose finger contacts are the same bit for bit (points and
@@ -288,16 +281,14 @@ class GraspSet:
         (grasp, sample) instances of :func:`motion_conditioned` are the same arrays, so the
         quasi-static tests are decided once per class (many grasps share their contacts and
         differ only by the gripper's pose or opening)."""
-        memo = self._classes_memo
-        if memo[0] is not world:
+        def classes() -> IntArray:
             q, n, modes = self._finger_rows
-            mu = self._finger_mu(world)
             g = len(self)
             keys = np.concatenate([q.reshape(g, -1).view(np.int64), n.reshape(g, -1).view(np.int64),
-                                   mu.view(np.int64), modes.astype(np.int64)], axis=1)
-            memo[1] = _ro(row_groups(keys)[0])
-            memo[0] = world
-        return memo[1]
+                                   self._finger_mu(world).view(np.int64), modes.astype(np.int64)], axis=1)
+            return row_groups(keys)[0]
+
+        return self._per_world(world, "contact_classes", classes)
 
     def _contact_mu(self, world: World) -> FloatArray:
         n = self.n_object

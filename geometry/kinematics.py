@@ -173,14 +173,7 @@ def _solve_two_lines(lines, theta: FloatArray) -> FloatArray:
             A[..., row, 0] = rmx
             A[..., row, 1] = rmy
             b[..., row] = rmx * w0 + rmy * w1 - k
-    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
-    ok = np.abs(det) > 1e-9
-    safe = np.where(ok, det, 1.0)
-    tx = (b[..., 0] * A[..., 1, 1] - b[..., 1] * A[..., 0, 1]) / safe
-    ty = (A[..., 0, 0] * b[..., 1] - A[..., 1, 0] * b[..., 0]) / safe
-    out = np.stack([tx, ty], axis=-1)
-    out[~ok] = np.nan
-    return out
+    return _solve_2x2(A, b)
 
 
 def two_contact(world: World, start: Pose, kept: tuple[Contact, Contact], sense: int) -> Motion:
@@ -243,6 +236,19 @@ def _poses_many(motions: Sequence[Motion], params: Sequence[Sequence[float] | Fl
     return np.split(out, np.cumsum(sizes)[:-1])
 
 
+def _solve_2x2(A: FloatArray, b: FloatArray) -> FloatArray:
+    """``t`` with ``A t = b`` for stacked 2 x 2 systems (..., 2, 2), by Cramer's rule;
+    ``nan`` where ``|det A| <= 1e-9`` (parallel contact lines)."""
+    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+    ok = np.abs(det) > 1e-9
+    safe = np.where(ok, det, 1.0)
+    tx = (b[..., 0] * A[..., 1, 1] - b[..., 1] * A[..., 0, 1]) / safe
+    ty = (A[..., 0, 0] * b[..., 1] - A[..., 1, 0] * b[..., 0]) / safe
+    out = np.stack([tx, ty], axis=-1)
+    out[~ok] = np.nan
+    return out
+
+
 def _solve_line_rows(lines: FloatArray, theta: FloatArray) -> FloatArray:
     """:func:`_solve_two_lines` with each row's own two lines, (n, 2, 6)."""
     c, s = np.cos(theta), np.sin(theta)
@@ -256,14 +262,7 @@ def _solve_line_rows(lines: FloatArray, theta: FloatArray) -> FloatArray:
         A[:, row, 0] = np.where(edge, w0, rx)
         A[:, row, 1] = np.where(edge, w1, ry)
         b[:, row] = np.where(edge, k - (w0 * rx + w1 * ry), rx * w0 + ry * w1 - k)
-    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
-    ok = np.abs(det) > 1e-9
-    safe = np.where(ok, det, 1.0)
-    tx = (b[..., 0] * A[..., 1, 1] - b[..., 1] * A[..., 0, 1]) / safe
-    ty = (A[..., 0, 0] * b[..., 1] - A[..., 1, 0] * b[..., 0]) / safe
-    out = np.stack([tx, ty], axis=-1)
-    out[~ok] = np.nan
-    return out
+    return _solve_2x2(A, b)
 
 
 # --------------------------------------------------------------------------- sweeps

@@ -456,6 +456,22 @@ def degenerate_instances(rng: np.random.Generator, n: int, count: int):
     return Contacts.make(pts, nrm, mu, modes, slide), com, 50.0
 
 
+def _assert_fast_decides_as_definition(rng: np.random.Generator, c: Contacts, com: np.ndarray,
+                                       L: float) -> np.ndarray:
+    """``feasible_batch`` at random margins (half the default) decides every instance as
+    the certificate rule one instance at a time, with both outcomes present; returns the
+    instances' generators."""
+    n = c.batch
+    margin = np.where(rng.random(n) < 0.5, FEASIBILITY_MARGIN, rng.uniform(-0.05, 0.2, n))
+    fast = feasible_batch(c, com, L, margin)
+    gens, pen = wrench_generators(c, com, L)
+    slow = np.array([not pen[i] and _decide_one(gens[i], np.array([0.0, 1.0, 0.0]), float(margin[i]))
+                     for i in range(n)])
+    assert (fast == slow).all(), np.flatnonzero(fast != slow)[:10]
+    assert fast.any() and not fast.all()  # both outcomes
+    return gens
+
+
 @pytest.mark.parametrize("count", [1, 2, 3, 4, 6])
 def test_fast_path_decides_as_its_triple_by_triple_definition(count: int):
     """The vectorised kernel (blocks of triples, the instances accepted early left out of
@@ -464,13 +480,7 @@ def test_fast_path_decides_as_its_triple_by_triple_definition(count: int):
     rng = np.random.default_rng(1000 + count)
     n = 1500 if count < 6 else 400
     c, com, L = degenerate_instances(rng, n, count)
-    margin = np.where(rng.random(n) < 0.5, FEASIBILITY_MARGIN, rng.uniform(-0.05, 0.2, n))
-    fast = feasible_batch(c, com, L, margin)
-    gens, pen = wrench_generators(c, com, L)
-    slow = np.array([not pen[i] and _decide_one(gens[i], np.array([0.0, 1.0, 0.0]), float(margin[i]))
-                     for i in range(n)])
-    assert (fast == slow).all(), np.flatnonzero(fast != slow)[:10]
-    assert fast.any() and not fast.all()  # both outcomes
+    gens = _assert_fast_decides_as_definition(rng, c, com, L)
     t = rng.normal(size=(n, 3)) * (rng.random((n, 3)) < 0.7)
     g = np.where(rng.random(gens.shape[:2] + (1,)) < 0.2, 0.0, gens)
     fast = cone_contains(g, t, 1e-7)
@@ -525,13 +535,7 @@ def test_fast_path_stages_decide_as_their_definition(count: int, compact: float,
     c, com, L = degenerate_instances(rng, n, count)
     if full:
         c = c.with_modes(rng.choice([S, R], c.modes.shape))
-    margin = np.where(rng.random(n) < 0.5, FEASIBILITY_MARGIN, rng.uniform(-0.05, 0.2, n))
-    fast = feasible_batch(c, com, L, margin)
-    gens, pen = wrench_generators(c, com, L)
-    slow = np.array([not pen[i] and _decide_one(gens[i], np.array([0.0, 1.0, 0.0]), float(margin[i]))
-                     for i in range(n)])
-    assert (fast == slow).all(), np.flatnonzero(fast != slow)[:10]
-    assert fast.any() and not fast.all()  # both outcomes
+    _assert_fast_decides_as_definition(rng, c, com, L)
 
 
 # --------------------------------------------------------------------------------------
