@@ -42,6 +42,7 @@ from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Failure, FailureCause, FailureTier, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family
 from ldhp_tamp.primitives.registry import Sequel, Transition
+from ldhp_tamp.prior import STATS_KEY as PRIOR_STATS_KEY, TransitionPrior
 from ldhp_tamp.scenario import Scenario
 from ldhp_tamp.streams import PathSearch, PosePath, StreamStats
 from ldhp_tamp.validate import support_analysis, validate_plan
@@ -95,6 +96,11 @@ class SolveOptions:
     transitions are forbidden); ``False`` (the ``ldhp-nofeedback`` planner): nothing is
     forbidden and the symbolic tier re-plans blind, each iteration drawing other stream
     samples from the same generator."""
+    prior: TransitionPrior | None = None
+    """A transition prior (:mod:`ldhp_tamp.prior`, ``solve --prior FILE``): the
+    transitions it rates below its ``defer_below`` are left out of the symbolic tier's
+    plans until no plan is left without them. ``None``: every admissible transition from
+    the start."""
 
 
 @dataclass
@@ -193,14 +199,26 @@ class _Counters:
     contact_state_nodes: int = 0
     pose_paths: int = 0
     judge_rejections: int = 0
+    # per transition label: [accepted, refused] by the bottom tier (ldhp_tamp.prior)
+    outcomes: dict[str, list[int]] = field(default_factory=dict)
+    deferred: int | None = None  # transitions a prior deferred (None: no prior)
+    prior_relaxed: bool = False  # whether the deferred transitions were let back in
+
+    def record(self, label: str, accepted: bool) -> None:
+        self.outcomes.setdefault(label, [0, 0])[0 if accepted else 1] += 1
 
 
 def _stats(engine: str, c: _Counters, clock: _Clock) -> PlanStats:
+    extra: dict[str, object] = {"pose_paths": c.pose_paths, "judge_rejections": c.judge_rejections,
+                                PRIOR_STATS_KEY: {k: {"accepted": a, "refused": r}
+                                                  for k, (a, r) in sorted(c.outcomes.items())}}
+    if c.deferred is not None:
+        extra["prior_deferred"] = c.deferred
+        extra["prior_relaxed"] = c.prior_relaxed
     return PlanStats(engine=engine, contact_state_nodes=c.contact_state_nodes,
                      grasp_graph_nodes=c.grasp_graph_nodes, grasp_graph_edges=c.grasp_graph_edges,
                      top_iterations=c.top_iterations, refinements=c.refinements,
-                     feasibility_checks=c.feasibility_checks, time_s=clock.as_dict(),
-                     extra={"pose_paths": c.pose_paths, "judge_rejections": c.judge_rejections})
+                     feasibility_checks=c.feasibility_checks, time_s=clock.as_dict(), extra=extra)
 
 
 def _failed(scenario: Scenario, engine: str, failure: _Attempt, c: _Counters, clock: _Clock,
@@ -330,34 +348,53 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     # the streams' sweeps, two at a time, with the bottom tier's helper once it has one
     ctx = replace(ctx, helper=grasp_planner.live_helper)
     judge = _Judge(scenario, engine, options.simulate, c, clock)
+    # The transitions a prior rates unlikely to pass the bottom tier: left out of the plans
+    # until no plan is left without them.
+    deferred: set[Transition] = set()
+    if options.prior is not None:
+        every = {Transition(a, *p).label: Transition(a, *p) for a, pairs in transitions.items() for p in pairs}
+        deferred = {every[label] for label in options.prior.deferred(every)}
+        c.deferred = len(deferred)
+        if deferred:
+            say(f"the prior defers {len(deferred)} transition(s): "
+                + ", ".join(sorted(t.label for t in deferred)[:5]) + (", ..." if len(deferred) > 5 else ""))
     try:  # the helper process ends with the solve, however it ends
         forbidden: set[Transition | Sequel] = set()
         for iteration in range(1, h_max + 1):
             c.top_iterations = iteration
             budget.check(deadline, f"the top tier, before iteration {iteration}")
             # ---- top tier, step 2: contact-state plan -------------------------------------
-            t0 = budget.clock()
-            allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in forbidden)
-                       for a, pairs in transitions.items()}
-            keep = relevant_states(ctx, allowed)
-            graph = symbolic.ContactGraph(
-                states=tuple(s for s in ctx.states if s in keep),
-                transitions={a: frozenset(p for p in pairs if p[0] in keep and p[1] in keep) for a, pairs in allowed.items()},
-                start=ctx.start_state, goal=ctx.goal_state,
-                start_touching=scenario.starts_held, goal_release=scenario.goal_release)
-            problem = symbolic.build_problem(domain, graph, forbidden=frozenset(forbidden))
-            if options.emit_pddl is not None:
-                symbolic.emit_pddl(options.emit_pddl, problem, iteration)
-            # A pure-Python engine under the armed alarm runs in this process (the alarm
-            # interrupts it at the deadline); otherwise in a child killed at the deadline.
-            here = deadline is not None and engine in symbolic.IN_PROCESS_ENGINES and budget.alarm_armed()
-            try:
-                sres = symbolic.solve(problem, engine, timeout_s=None if here else budget.remaining(deadline))
-            except TimeBudgetExceeded as exc:
-                raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({engine} hit the time "
-                                         f"limit, interrupted by the budget's alarm in {exc.where})") from exc
-            finally:
-                clock.symbolic += budget.clock() - t0
+            while True:  # once, or twice when the deferred transitions are let back in
+                t0 = budget.clock()
+                allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in forbidden
+                                        and Transition(a, *p) not in deferred)
+                           for a, pairs in transitions.items()}
+                keep = relevant_states(ctx, allowed)
+                graph = symbolic.ContactGraph(
+                    states=tuple(s for s in ctx.states if s in keep),
+                    transitions={a: frozenset(p for p in pairs if p[0] in keep and p[1] in keep)
+                                 for a, pairs in allowed.items()},
+                    start=ctx.start_state, goal=ctx.goal_state,
+                    start_touching=scenario.starts_held, goal_release=scenario.goal_release)
+                problem = symbolic.build_problem(domain, graph, forbidden=frozenset(forbidden))
+                if options.emit_pddl is not None:
+                    symbolic.emit_pddl(options.emit_pddl, problem, iteration)
+                # A pure-Python engine under the armed alarm runs in this process (the alarm
+                # interrupts it at the deadline); otherwise in a child killed at the deadline.
+                here = deadline is not None and engine in symbolic.IN_PROCESS_ENGINES and budget.alarm_armed()
+                try:
+                    sres = symbolic.solve(problem, engine, timeout_s=None if here else budget.remaining(deadline))
+                except TimeBudgetExceeded as exc:
+                    raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({engine} hit the time "
+                                             f"limit, interrupted by the budget's alarm in {exc.where})") from exc
+                finally:
+                    clock.symbolic += budget.clock() - t0
+                if not (deferred and sres.status is symbolic.SymbolicStatus.UNSOLVABLE):
+                    break
+                say(f"iteration {iteration}: no plan without the {len(deferred)} deferred transition(s); "
+                    "planning with them")
+                deferred.clear()
+                c.prior_relaxed = True
             if sres.status is symbolic.SymbolicStatus.TIMEOUT and deadline is not None:
                 raise TimeBudgetExceeded(f"the symbolic tier, iteration {iteration} ({sres.reason})")
             if not sres.solved:
@@ -404,6 +441,8 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                 outcome = _bottom_tier(grasp_planner, path, l_max, c, clock, deadline, judge,
                                        options.judge_retries)
                 if outcome.steps is not None:
+                    for t in planned:
+                        c.record(t.label, True)
                     plan = _annotate(Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, outcome.steps,
                                           _stats(engine, c, clock)), scenario)
                     say(f"solved in {clock.as_dict()['total']:.2f} s")
@@ -418,6 +457,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                          " ".join(f"{s.primitive}@{s.step}" for s in path.segments), failed_step, outcome.reason)
                 if failed_step is not None:
                     failed_steps.append(failed_step)
+                    c.record(planned[failed_step].label, False)
             log.info("iteration %d: %d pose path(s) tried; streams: %d samples drawn, %d sample calls%s, "
                      "dead ends at steps %s, %d alignment failure(s)", iteration, tried, stream_stats.expansions,
                      stream_stats.sample_calls, " (work budget spent)" if stream_stats.budget_exhausted else "",
