@@ -47,6 +47,7 @@ import logging
 import math
 import os
 import platform
+import re
 import statistics
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -129,6 +130,11 @@ class BenchOptions:
     plan executes. The planners that take no such option ignore it."""
     executor: str = "local"
     """Where the runs go: ``local`` processes or ``dask`` (:mod:`ldhp_tamp.sweep`)."""
+    prior: str | None = None
+    """A transition prior file (:mod:`ldhp_tamp.prior`) every solve is given, or ``None``."""
+    keep_plans: bool = False
+    """Write every run's plan (solved or failed) to ``OUT/plans/`` (:data:`PLANS_DIR`):
+    what ``ldhp-tamp prior`` fits a prior from."""
     scheduler: str | None = None
     """``dask``: a running scheduler, ``tcp://HOST:PORT``; ``None``: a ``LocalCluster``
     of ``jobs`` workers."""
@@ -155,6 +161,11 @@ class BenchOptions:
             raise InputError(f"--timeout: must be a positive number of seconds, got {self.timeout_s}")
         if not (math.isfinite(self.grace_s) and self.grace_s >= 0):
             raise InputError(f"--grace: must be >= 0 seconds, got {self.grace_s}")
+        if self.prior is not None:  # read now: a bad file stops the bench before any run
+            from ldhp_tamp.prior import read_prior
+
+            read_prior(self.prior)
+            object.__setattr__(self, "prior", str(Path(self.prior).resolve()))
 
     @property
     def hard_limit_s(self) -> float | None:
@@ -183,6 +194,7 @@ class RunSpec:
     simulate: bool = True
     planner: str = "ldhp"
     judge_simulate: bool = False
+    prior_file: str | None = None
 
 
 @dataclass(frozen=True)
@@ -304,8 +316,20 @@ def plan_runs(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions
                                              engine=engine, seed=seed, samples_per_edge=k,
                                              object_vertices=sc.world.object.n, timeout_s=options.timeout_s,
                                              simulate=options.simulate, planner=planner,
-                                             judge_simulate=options.judge_simulate))
+                                             judge_simulate=options.judge_simulate, prior_file=options.prior))
     return tuple(specs)
+
+
+#: The folder of ``OUT`` that ``--plans`` writes the runs' plans into.
+PLANS_DIR = "plans"
+
+
+def plan_name(spec: RunSpec) -> str:
+    """The file name of a run's plan under ``OUT/plans/``: scenario, planner, engine, K
+    and seed (characters other than letters, digits, ``.``, ``_`` and ``-`` as ``_``)."""
+    stem = "-".join([spec.scenario, spec.planner] + ([spec.engine] if spec.engine else [])
+                    + [f"K{spec.samples_per_edge}", f"s{spec.seed}"])
+    return re.sub(r"[^A-Za-z0-9._-]", "_", stem) + "-plan.json"
 
 
 def _row(spec: RunSpec, status: BenchStatus, reason: str, wall_s: float, **counts: Any) -> BenchRow:
@@ -332,6 +356,10 @@ def solve_run(spec: RunSpec) -> BenchRow:
                              "samples_per_edge": spec.samples_per_edge, "simulate": spec.judge_simulate}
     if spec.timeout_s is not None and solver_has_timeout():
         knobs["timeout"] = spec.timeout_s
+    if spec.prior_file is not None:
+        from ldhp_tamp.prior import read_prior
+
+        knobs["prior"] = read_prior(spec.prior_file)
     result = get_planner(spec.planner)(scenario, SolveOptions(**knobs))
     plan = result.plan
     if spec.plan_file is not None:
@@ -462,6 +490,7 @@ def format_json(rows: Sequence[BenchRow], options: BenchOptions, created: str | 
                     "timeout_s": options.timeout_s, "grace_s": options.grace_s,
                     "hard_limit_s": options.hard_limit_s, "jobs": options.jobs, "simulate": options.simulate,
                     "executor": options.executor, "scheduler": options.scheduler,
+                    "prior": options.prior, "keep_plans": options.keep_plans,
                     "solver_timeout": options.timeout_s is not None and solver_has_timeout()},
         "host": _host(),
         "columns": list(COLUMNS),
@@ -693,6 +722,13 @@ def run_bench(scenarios: Sequence[str | os.PathLike[str]], options: BenchOptions
     """
     all_specs = plan_runs(scenarios, options)
     _out_dir(out_dir)
+    if options.keep_plans:
+        plans = Path(out_dir) / PLANS_DIR
+        try:
+            plans.mkdir(exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"{plans}: --plans: cannot create the directory: {exc.strerror or exc}") from None
+        all_specs = tuple(dataclasses.replace(s, plan_file=str(plans / plan_name(s))) for s in all_specs)
     kept = _resumed(all_specs, out_dir, options) if resume else {}
     specs = tuple(s for s in all_specs if s.index not in kept)  # the runs to make
     say = progress or (lambda _msg: None)

@@ -139,10 +139,15 @@ def cmd_solve(args: argparse.Namespace) -> int:
     # the planner's imports (unified-planning, scipy, ...) only for a scenario that loads
     from ldhp_tamp.plan import write_plan
     from ldhp_tamp.tamp import SolveOptions, solve
+    prior = None
+    if args.prior is not None:
+        from ldhp_tamp.prior import read_prior
+
+        prior = read_prior(args.prior)
     options = SolveOptions(engine=args.engine, seed=args.seed, timeout=args.timeout,
                            started=getattr(args, "started", None),  # --timeout counts from main()
                            emit_pddl=Path(args.emit_pddl) if args.emit_pddl else None,
-                           simulate=args.simulate)
+                           simulate=args.simulate, prior=prior)
     quiet = args.quiet
 
     def progress(msg: str) -> None:
@@ -206,6 +211,17 @@ def _positive(what: str, positive: str) -> Callable[[str], float]:
 
 
 _seconds = _positive("a number of seconds", "a positive number of seconds")
+
+
+def _fraction(text: str) -> float:
+    """An argparse type: a number in [0, 1]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}")
+    return value
 _speed = _positive("a speed in mm/s", "a positive speed in mm/s")
 
 
@@ -244,7 +260,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     options = BenchOptions(engines=args.engines, planners=args.planners, seeds=args.seeds, samples=args.samples,
                            timeout_s=args.timeout, grace_s=args.grace, jobs=args.jobs,
-                           simulate=not args.no_simulate, executor=args.executor, scheduler=args.scheduler)
+                           simulate=not args.no_simulate, executor=args.executor, scheduler=args.scheduler,
+                           prior=args.prior, keep_plans=args.plans)
     quiet = args.quiet
 
     def progress(msg: str) -> None:
@@ -279,6 +296,26 @@ def _add_executor(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="with --executor dask: a running Dask scheduler (default: a LocalCluster of --jobs "
                         "workers on this machine)")
+
+
+def cmd_prior(args: argparse.Namespace) -> int:
+    """Fit a transition prior from plan files (``bench --plans`` keeps them) and write it."""
+    from ldhp_tamp.prior import fit_prior, plan_files, write_prior
+
+    files = plan_files(args.plans)
+    prior = fit_prior(files, defer_below=args.defer_below)
+    try:
+        write_prior(prior, args.out)
+    except OSError as exc:
+        raise InputError(f"{args.out}: --out: cannot write the prior: {exc.strerror or exc}") from exc
+    deferred = sorted(prior.deferred(prior.transitions))
+    print(f"prior: {len(prior.transitions)} transitions from {prior.plans} plan(s) of "
+          f"{', '.join(prior.fit_on)} -> {args.out}")
+    print(f"  deferred (acceptance below {prior.defer_below:g}): {len(deferred)}")
+    for label in deferred:
+        seen = prior.transitions[label]
+        print(f"    {label}: accepted {seen.accepted}, refused {seen.refused}")
+    return EXIT_OK
 
 
 def cmd_ablate(args: argparse.Namespace) -> int:
@@ -370,7 +407,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "check": cmd_check, "validate": cmd_validate, "solve": cmd_solve, "bench": cmd_bench,
-    "ablate": cmd_ablate, "render": cmd_render, "simulate": cmd_simulate}
+    "ablate": cmd_ablate, "render": cmd_render, "simulate": cmd_simulate, "prior": cmd_prior}
 
 
 def _add_strict(p: argparse.ArgumentParser) -> None:
@@ -426,6 +463,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--simulate", action="store_true",
                    help="judge every plan found in the physics simulation too (ldhp-tamp simulate): a plan "
                         "that diverges is fed back like one that fails validation and the search goes on")
+    p.add_argument("--prior", metavar="FILE",
+                   help="a transition prior (ldhp-tamp prior): the transitions it rates unlikely to pass the "
+                        "bottom tier are left out of the plans until no plan is left without them")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
     p.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
                    help="as 'ldhp-tamp -v solve': the planner's progress on stderr and, for a failed "
@@ -470,7 +510,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plots", action="store_true",
                    help="also draw time_vs_samples / time_vs_vertices .png and .svg when the runs vary K "
                         "or the vertex count")
+    p.add_argument("--prior", metavar="FILE", help="give every solve this transition prior (as solve --prior)")
+    p.add_argument("--plans", action="store_true",
+                   help="keep every run's plan in OUT/plans/ (what 'ldhp-tamp prior' fits a prior from)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages on stderr")
+
+    p = sub.add_parser("prior", help="fit a transition prior from plan files (bench --plans keeps them)",
+                       description="Add up, over plan files, how often each contact-state transition was\n"
+                                   "accepted by the bottom tier (a solved pose path took it) and refused (a\n"
+                                   "pose path failed there), and write the counts as a prior (ldhp-prior/1)\n"
+                                   "for solve --prior and bench --prior. State names are those of one world:\n"
+                                   "fit a prior on the world you will use it on. See docs/formats/prior.md.",
+                       epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("plans", nargs="+", metavar="PLAN",
+                   help="plan JSON files, or directories (their *-plan.json files, recursively)")
+    p.add_argument("--out", required=True, metavar="FILE", help="the prior file to write")
+    p.add_argument("--defer-below", type=_fraction, default=0.25, metavar="P",
+                   help="defer the transitions whose acceptance (accepted + 1) / (accepted + refused + 2) "
+                        "is below P (default 0.25: refused three times and never accepted)")
 
     p = sub.add_parser("ablate", help="remove one primitive at a time and solve each scenario (Table III)",
                        description="For each action of the domain (and for none, the baseline), write a\n"

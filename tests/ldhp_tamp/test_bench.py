@@ -123,12 +123,31 @@ def test_a_run_with_a_plan_file_keeps_its_plan(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pick-plan.json"]  # no temporary file
 
 
+def test_bench_keeps_the_plans_and_gives_the_solves_a_prior(tmp_path: Path) -> None:
+    """``--plans`` writes every run's plan into OUT/plans/ (what ``ldhp-tamp prior`` fits
+    from); ``--prior`` gives it to every solve (the plans say so)."""
+    from ldhp_tamp.plan import read_plan
+    from ldhp_tamp.prior import Outcomes, TransitionPrior, fit_prior, write_prior
+
+    prior = write_prior(TransitionPrior({"air-move l1-e3->free": Outcomes(5, 0)}), tmp_path / "prior.json")
+    out = tmp_path / "bench"
+    assert main(["bench", str(PICK), "--seeds", "2", "--plans", "--prior", str(prior), "--no-simulate",
+                 "--out", str(out), "-q"]) == EXIT_OK
+    plans = sorted((out / "plans").iterdir())
+    assert [p.name for p in plans] == ["example-pick-ldhp-pyperplan-K100-s0-plan.json",
+                                       "example-pick-ldhp-pyperplan-K100-s1-plan.json"]
+    assert all(read_plan(p).stats.extra["prior_deferred"] == 0 for p in plans)
+    assert json.loads((out / "runs.json").read_text(encoding="utf-8"))["options"]["prior"] == str(prior.resolve())
+    assert fit_prior(plans).plans == 2
+
+
 @pytest.mark.parametrize("argv, named", [
     (["missing.toml"], "missing.toml"),
     ([str(PICK), "--engines", "no-such-engine"], "no-such-engine"),
     ([str(PICK), "--samples", "0,10"], "--samples"),
     ([str(PICK), "--jobs", "0"], "--jobs"),
     ([str(PICK), "--timeout", "-1"], "--timeout"),
+    ([str(PICK), "--prior", "missing-prior.json"], "missing-prior.json"),
 ])
 def test_bad_input_exits_2_before_anything_runs(argv: list[str], named: str, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
