@@ -646,7 +646,7 @@ def _out_dir(out_dir: str | os.PathLike[str]) -> Path:
 #: Statuses a resumed bench keeps; an ``error`` run (a crash, a lost worker) runs again.
 FINAL_STATUSES = frozenset({BenchStatus.SOLVED, BenchStatus.FAILED, BenchStatus.TIMEOUT})
 #: Options whose change makes the stored rows of another configuration.
-_RESUME_OPTIONS = ("timeout_s", "grace_s", "simulate")
+_RESUME_OPTIONS = ("timeout_s", "grace_s", "simulate", "prior")
 
 
 def _run_key(values: Callable[[str], Any]) -> tuple[Any, ...]:
@@ -664,7 +664,7 @@ def read_rows(path: str | os.PathLike[str], options: BenchOptions) -> tuple[Benc
     ------
     InputError
         A file that cannot be read or is not ``ldhp-bench/1`` with this version's columns,
-        or whose runs were made with another time limit or simulation setting (the
+        or whose runs were made with another time limit, simulation setting or prior (the
         message names the file and the option).
     """
     try:

@@ -519,8 +519,10 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Add up, over plan files, how often each contact-state transition was\n"
                                    "accepted by the bottom tier (a solved pose path took it) and refused (a\n"
                                    "pose path failed there), and write the counts as a prior (ldhp-prior/1)\n"
-                                   "for solve --prior and bench --prior. State names are those of one world:\n"
-                                   "fit a prior on the world you will use it on. See docs/formats/prior.md.",
+                                   "for solve --prior and bench --prior. State names come from the numbering\n"
+                                   "of the object's and the environment's vertices and edges: fit a prior on\n"
+                                   "the world you will use it on, or on variants of it numbered alike.\n"
+                                   "See docs/formats/prior.md.",
                        epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("plans", nargs="+", metavar="PLAN",
                    help="plan JSON files, or directories (their *-plan.json files, recursively)")

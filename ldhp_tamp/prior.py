@@ -12,9 +12,10 @@ without them first, and with them as soon as no plan is left without them. A pri
 which route is tried first, never what is feasible: the same checks decide every route,
 and a deferred transition is used when the task needs it.
 
-State names are those of one world (``v1`` is the object's first vertex, ``e1`` the
-environment's first edge): a prior is about the world it was fitted on (the scenarios it
-names in ``fit_on``); on another world its labels mean other contacts.
+State names come from a world's numbering (``v1`` is the object's first vertex, ``e1`` the
+environment's first edge): a prior is about the worlds numbered like the ones it was
+fitted on (the scenarios it names in ``fit_on``: task 2's slot and its variants of
+another length, say); on a world numbered otherwise its labels mean other contacts.
 
 The file (``ldhp-prior/1``, JSON)::
 

@@ -139,6 +139,9 @@ def test_bench_keeps_the_plans_and_gives_the_solves_a_prior(tmp_path: Path) -> N
     assert all(read_plan(p).stats.extra["prior_deferred"] == 0 for p in plans)
     assert json.loads((out / "runs.json").read_text(encoding="utf-8"))["options"]["prior"] == str(prior.resolve())
     assert fit_prior(plans).plans == 2
+    # the same --out without the prior is another bench: it is not resumed
+    with pytest.raises(InputError, match="prior"):
+        run_bench([PICK], BenchOptions(seeds=2, simulate=False), out, resume=True)
 
 
 @pytest.mark.parametrize("argv, named", [
