@@ -130,14 +130,14 @@ class BenchOptions:
     plan executes. The planners that take no such option ignore it."""
     executor: str = "local"
     """Where the runs go: ``local`` processes or ``dask`` (:mod:`ldhp_tamp.sweep`)."""
+    scheduler: str | None = None
+    """``dask``: a running scheduler, ``tcp://HOST:PORT``; ``None``: a ``LocalCluster``
+    of ``jobs`` workers."""
     prior: str | None = None
     """A transition prior file (:mod:`ldhp_tamp.prior`) every solve is given, or ``None``."""
     keep_plans: bool = False
     """Write every run's plan (solved or failed) to ``OUT/plans/`` (:data:`PLANS_DIR`):
     what ``ldhp-tamp prior`` fits a prior from."""
-    scheduler: str | None = None
-    """``dask``: a running scheduler, ``tcp://HOST:PORT``; ``None``: a ``LocalCluster``
-    of ``jobs`` workers."""
 
     def __post_init__(self) -> None:
         check_executor(self.executor, self.scheduler)

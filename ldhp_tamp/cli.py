@@ -211,6 +211,7 @@ def _positive(what: str, positive: str) -> Callable[[str], float]:
 
 
 _seconds = _positive("a number of seconds", "a positive number of seconds")
+_speed = _positive("a speed in mm/s", "a positive speed in mm/s")
 
 
 def _fraction(text: str) -> float:
@@ -222,7 +223,6 @@ def _fraction(text: str) -> float:
     if not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}")
     return value
-_speed = _positive("a speed in mm/s", "a positive speed in mm/s")
 
 
 def _comma_names(text: str) -> tuple[str, ...]:
