@@ -309,7 +309,8 @@ def cmd_prior(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise InputError(f"{args.out}: --out: cannot write the prior: {exc.strerror or exc}") from exc
     deferred = sorted(prior.deferred(prior.transitions))
-    print(f"prior: {len(prior.transitions)} transitions from {prior.plans} plan(s) of "
+    n = len(prior.transitions)
+    print(f"prior: {n} transition{'' if n == 1 else 's'} from {prior.plans} plan(s) of "
           f"{', '.join(prior.fit_on)} -> {args.out}")
     print(f"  deferred (acceptance below {prior.defer_below:g}): {len(deferred)}")
     for label in deferred:

@@ -154,7 +154,7 @@ def test_the_prior_command_fits_and_writes_a_prior(pick_plan: Path, tmp_path: Pa
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "prior.json"
     assert main(["prior", str(pick_plan), "--out", str(out), "--defer-below", "0.1"]) == EXIT_OK
-    assert "1 transitions from 1 plan(s) of example-pick" in capsys.readouterr().out
+    assert "1 transition from 1 plan(s) of example-pick" in capsys.readouterr().out
     prior = read_prior(out)
     assert prior.defer_below == 0.1 and prior.transitions == {"air-move l1-e3->free": Outcomes(1, 0)}
     # and a solve takes it
