@@ -352,7 +352,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     # until no plan is left without them.
     deferred: set[Transition] = set()
     if options.prior is not None:
-        every = {Transition(a, *p).label: Transition(a, *p) for a, pairs in transitions.items() for p in pairs}
+        every = {t.label: t for a, pairs in transitions.items() for t in (Transition(a, *p) for p in pairs)}
         deferred = {every[label] for label in options.prior.deferred(every)}
         c.deferred = len(deferred)
         if deferred:
@@ -366,8 +366,8 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
             # ---- top tier, step 2: contact-state plan -------------------------------------
             while True:  # once, or twice when the deferred transitions are let back in
                 t0 = budget.clock()
-                allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in forbidden
-                                        and Transition(a, *p) not in deferred)
+                avoid = forbidden | deferred
+                allowed = {a: frozenset(p for p in pairs if Transition(a, *p) not in avoid)
                            for a, pairs in transitions.items()}
                 keep = relevant_states(ctx, allowed)
                 graph = symbolic.ContactGraph(
