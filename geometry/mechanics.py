@@ -53,6 +53,7 @@ import functools
 import itertools
 import logging
 import math
+import os
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -65,6 +66,21 @@ from geometry.poses import BoolArray, FloatArray, Pose
 from geometry.tolerances import FEASIBILITY_MARGIN
 
 logger = logging.getLogger(__name__)
+
+#: The interface version of geometry/_cone.c this module calls (its ``API``).
+_KERNEL_API: int = 2
+
+try:  # the compiled cone test (geometry/_cone.c), built where a C compiler is found
+    from geometry import _cone as _cone_kernel
+except ImportError:  # pragma: no cover - an installation without a C compiler: numpy decides alone
+    _cone_kernel = None
+if os.environ.get("LDHP_TAMP_PURE_NUMPY", "") not in ("", "0"):  # numpy alone, to compare (docs/design/mechanics.md)
+    _cone_kernel = None
+if _cone_kernel is not None and getattr(_cone_kernel, "API", None) != _KERNEL_API:  # pragma: no cover
+    # an editable install whose extension predates the source: numpy decides until rebuilt
+    logger.warning("geometry._cone (%s) is out of date; numpy decides the cone tests until it is rebuilt "
+                   "(pip install -e .)", getattr(_cone_kernel, "__file__", "?"))
+    _cone_kernel = None
 
 ModeArray = NDArray[np.int8]
 
@@ -896,9 +912,30 @@ def _contains_degenerate(P: Rows, Q: Rows, A: Rows) -> BoolArray:
     return acc
 
 
-def _contains(G: Gens, t: FloatArray) -> BoolArray:
+def _contains_numpy(G: Gens, t: FloatArray) -> BoolArray:
+    """The cone test's rule in numpy: is ``t[:, i]`` in the cone of the generators
+    ``G[:, :, i]`` of a chunk (``G`` (3, K, b), ``t`` (3, b))?"""
     P, Q, A, zero = _reduce_to_ey(G[0], G[1], G[2], t)
     return _contains_reduced(P, Q, A, zero.shape[0]) | zero
+
+
+def _contains_compiled(G: Gens, t: FloatArray) -> BoolArray:
+    """:func:`_contains_numpy`'s rule in the compiled kernel (``geometry/_cone.c``): the
+    same operations on the same values, instance by instance, stopping at an instance's
+    first certificate."""
+    G = np.ascontiguousarray(G, dtype=float)
+    out = np.empty(G.shape[2], dtype=bool)
+    _cone_kernel.contains(G[0], G[1], G[2], np.ascontiguousarray(t, dtype=float), out.view(np.uint8),
+                          _CROSS_TOL, _DET_TOL, _DEGENERATE_TOL)
+    return out
+
+
+def _contains(G: Gens, t: FloatArray) -> BoolArray:
+    """Cone membership of a chunk: the compiled kernel where it is built and the chunk
+    has at most its number of generator slots, otherwise numpy (both decide alike)."""
+    if _cone_kernel is not None and G.shape[1] <= _cone_kernel.MAX_SLOTS and G.shape[2]:
+        return _contains_compiled(G, t)
+    return _contains_numpy(G, t)
 
 
 def _shifted_target(G: Gens, target: FloatArray, eps: FloatArray | float) -> FloatArray:
@@ -957,9 +994,35 @@ def _check_contacts_frame(contacts: Contacts, com: ArrayLike, length_scale: floa
 _EY = np.array([0.0, 1.0, 0.0])
 
 
+_MODE_CODES = (int(ContactMode.STICKING), int(ContactMode.ROLLING), int(ContactMode.SLIDING),
+               int(ContactMode.PENETRATING))
+
+
 def _feasible_impl(
     contacts: Contacts, com: FloatArray, inv_L: FloatArray, margin: FloatArray, mu_override: FloatArray | None = None
 ) -> BoolArray:
+    """Feasibility of every instance: the compiled kernel (generators, shifted target and
+    cone test fused, ``geometry/_cone.c``) where it is built and takes the contact count,
+    otherwise :func:`_feasible_numpy` (both decide alike)."""
+    B, C = contacts.batch, contacts.count
+    if _cone_kernel is not None and 0 < 2 * C <= _cone_kernel.MAX_SLOTS:
+        mu = contacts.mu if mu_override is None else np.asarray(mu_override, dtype=float)
+        if mu.shape == (B, C):
+            out = np.empty(B, dtype=bool)
+            c = np.ascontiguousarray
+            _cone_kernel.feasible(c(contacts.points), c(contacts.normals), c(mu), c(contacts.modes),
+                                  c(contacts.slide_dirs), c(com, dtype=float), c(inv_L, dtype=float),
+                                  c(margin, dtype=float), out.view(np.uint8), _CHUNK, _MODE_CODES, MU_ZERO,
+                                  _CROSS_TOL, _DET_TOL, _DEGENERATE_TOL)
+            return out
+    return _feasible_numpy(contacts, com, inv_L, margin, mu_override)
+
+
+def _feasible_numpy(
+    contacts: Contacts, com: FloatArray, inv_L: FloatArray, margin: FloatArray, mu_override: FloatArray | None = None
+) -> BoolArray:
+    """The feasibility rule in numpy, chunk by chunk: the generators, the target e_y
+    shifted by the margin, the cone test, and no PENETRATING contact."""
     B = contacts.batch
     out = np.empty(B, dtype=bool)
     if contacts.count == 0:
