@@ -2,8 +2,9 @@
 
 Measures checks per second (of the best call) of the fast batched path
 (``feasible_batch``) for 2, 3, 4 and 6 contacts, all STICKING (two generators each: the worst case for a given contact count),
-called on batches of 100,000 instances, and of the reference path (``feasible_reference``,
-cvxpy + Clarabel, one instance per call). Run::
+called on batches of 100,000 instances: with the compiled kernel (``geometry/_cone.c``,
+where it is built) and with numpy alone (the same rule), and of the reference path
+(``feasible_reference``, cvxpy + Clarabel, one instance per call). Run::
 
     .venv/bin/python benchmarks/micro_mechanics.py [seconds]
 """
@@ -16,6 +17,7 @@ import time
 
 import numpy as np
 
+import geometry.mechanics as mechanics
 from geometry.mechanics import ContactMode, Contacts, feasible_batch, feasible_reference
 
 BATCH = 100_000
@@ -48,17 +50,24 @@ def _rate(fn, per_call: int, seconds: float) -> float:
 
 
 def run(seconds: float = 2.0) -> dict[str, float]:
-    """Checks per second, keyed ``fast_C`` (C contacts) and ``reference_C``.
+    """Checks per second, keyed ``fast_C`` (C contacts; the compiled kernel where it is
+    built), ``numpy_C`` (numpy alone) and ``reference_C``.
 
     ``seconds`` is split evenly between the measurements.
     """
     rng = np.random.default_rng(0)
     counts = (2, 3, 4, 6)
-    share = seconds / (2 * len(counts))
+    share = seconds / (3 * len(counts))
     out: dict[str, float] = {}
+    kernel = mechanics._cone_kernel
     for c in counts:
         contacts, com, L = random_contacts(rng, BATCH, c)
         out[f"fast_{c}"] = _rate(lambda: feasible_batch(contacts, com, L), BATCH, share)
+        try:
+            mechanics._cone_kernel = None
+            out[f"numpy_{c}"] = _rate(lambda: feasible_batch(contacts, com, L), BATCH, share)
+        finally:
+            mechanics._cone_kernel = kernel
         singles = [contacts.select(slice(i, i + 1)) for i in range(200)]
         it = iter(range(10**9))
         out[f"reference_{c}"] = _rate(lambda: feasible_reference(singles[next(it) % 200], com, L), 1, share)
@@ -69,9 +78,12 @@ def run(seconds: float = 2.0) -> dict[str, float]:
 def main(argv: list[str]) -> None:
     seconds = float(argv[1]) if len(argv) > 1 else 2.0
     r = run(seconds)
-    print(f"{'contacts':>8} {'fast checks/s':>15} {'reference checks/s':>19} {'feasible':>9}")
+    built = "compiled kernel" if mechanics._cone_kernel is not None else "numpy: kernel not built"
+    print(f"fast path: {built}")
+    print(f"{'contacts':>8} {'fast checks/s':>15} {'numpy checks/s':>15} {'reference checks/s':>19} {'feasible':>9}")
     for c in (2, 3, 4, 6):
-        print(f"{c:>8} {r[f'fast_{c}']:>15,.0f} {r[f'reference_{c}']:>19,.0f} {r[f'feasible_share_{c}']:>9.2f}")
+        print(f"{c:>8} {r[f'fast_{c}']:>15,.0f} {r[f'numpy_{c}']:>15,.0f} {r[f'reference_{c}']:>19,.0f}"
+              f" {r[f'feasible_share_{c}']:>9.2f}")
 
 
 if __name__ == "__main__":
