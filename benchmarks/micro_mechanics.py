@@ -2,7 +2,7 @@
 
 Measures checks per second (of the best call) of the fast batched path
 (``feasible_batch``) for 2, 3, 4 and 6 contacts, all STICKING (two generators each: the worst case for a given contact count),
-called on batches of 100,000 instances: with the compiled kernel (``geometry/_cone.c``,
+called on batches of 100,000 instances: with the compiled kernel (``geometry/_kernels.c``,
 where it is built) and with numpy alone (the same rule), and of the reference path
 (``feasible_reference``, cvxpy + Clarabel, one instance per call). Run::
 
@@ -59,15 +59,15 @@ def run(seconds: float = 2.0) -> dict[str, float]:
     counts = (2, 3, 4, 6)
     share = seconds / (3 * len(counts))
     out: dict[str, float] = {}
-    kernel = mechanics._cone_kernel
+    kernel = mechanics._kernels
     for c in counts:
         contacts, com, L = random_contacts(rng, BATCH, c)
         out[f"fast_{c}"] = _rate(lambda: feasible_batch(contacts, com, L), BATCH, share)
         try:
-            mechanics._cone_kernel = None
+            mechanics._kernels = None
             out[f"numpy_{c}"] = _rate(lambda: feasible_batch(contacts, com, L), BATCH, share)
         finally:
-            mechanics._cone_kernel = kernel
+            mechanics._kernels = kernel
         singles = [contacts.select(slice(i, i + 1)) for i in range(200)]
         it = iter(range(10**9))
         out[f"reference_{c}"] = _rate(lambda: feasible_reference(singles[next(it) % 200], com, L), 1, share)
@@ -78,7 +78,7 @@ def run(seconds: float = 2.0) -> dict[str, float]:
 def main(argv: list[str]) -> None:
     seconds = float(argv[1]) if len(argv) > 1 else 2.0
     r = run(seconds)
-    built = "compiled kernel" if mechanics._cone_kernel is not None else "numpy: kernel not built"
+    built = "compiled kernel" if mechanics._kernels is not None else "numpy: kernel not built"
     print(f"fast path: {built}")
     print(f"{'contacts':>8} {'fast checks/s':>15} {'numpy checks/s':>15} {'reference checks/s':>19} {'feasible':>9}")
     for c in (2, 3, 4, 6):

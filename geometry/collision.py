@@ -51,6 +51,7 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 from shapely.geometry.polygon import orient
 
+from geometry.compiled import KERNELS
 from geometry.poses import BoolArray, transform_points
 from geometry.shapes import FloatArray, Polygon
 from geometry.tolerances import PENETRATION_TOL
@@ -240,6 +241,9 @@ _GROWN_CACHE: "weakref.WeakKeyDictionary[ErodedShape, dict[float, tuple[shapely.
     weakref.WeakKeyDictionary()
 
 
+#: The compiled exact-sign overlap (:mod:`geometry.compiled`), or None: numpy decides alone.
+_kernels = KERNELS
+
 # Exact orientation signs without GEOS: Shewchuk's filter for orient2d (a sign is certain
 # when the determinant exceeds 3.33e-16 times the sum of its two products' magnitudes;
 # 1e-15 is taken), the rest left to GEOS, whose predicates are exact.
@@ -291,6 +295,22 @@ def _strictly_convex(part: FloatArray) -> bool:
 
 
 def _convex_vs_target(placed: FloatArray, target: ErodedShape) -> tuple[BoolArray, BoolArray]:
+    """:func:`_convex_vs_target_numpy`'s ``(hit, decided)``, by the compiled kernel where
+    it is built (:mod:`geometry.compiled`; the same signs, the same decisions)."""
+    b, v = placed.shape[:2]
+    if _kernels is None or not 1 <= v <= _kernels.MAX_POLYGON:
+        return _convex_vs_target_numpy(placed, target)
+    starts, ends, lo, hi = _target_edges(target)
+    hit = np.empty(b, dtype=bool)
+    decided = np.empty(b, dtype=bool)
+    c = np.ascontiguousarray
+    _kernels.convex_overlap(c(placed, dtype=float), v, c(starts, dtype=float), c(ends, dtype=float),
+                            c(lo, dtype=float), c(hi, dtype=float), hit.view(np.uint8), decided.view(np.uint8),
+                            _ORIENT_ERR, _ORIENT_FLOOR)
+    return hit, decided
+
+
+def _convex_vs_target_numpy(placed: FloatArray, target: ErodedShape) -> tuple[BoolArray, BoolArray]:
     """``shapely.intersects(target, polygon)`` for strictly convex polygons (B, V, 2)
     (counter-clockwise) none of whose vertices is in the target, where exact
     orientation signs decide it: ``(hit, decided)``, each (B,).

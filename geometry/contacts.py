@@ -47,6 +47,7 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from geometry.collision import eroded_environment, object_env_overlap
+from geometry.compiled import KERNELS
 from geometry.features import Contact, ContactKind, ContactState
 from geometry.poses import BoolArray, IntArray, Pose, transform_points, wrap_angle
 from geometry.shapes import FloatArray
@@ -135,6 +136,10 @@ def _rotate(theta: FloatArray, pts: FloatArray) -> FloatArray:
     return np.stack([c * pts[None, :, 0] - s * pts[None, :, 1], s * pts[None, :, 0] + c * pts[None, :, 1]], axis=-1)
 
 
+#: The compiled principal-contact tests (:mod:`geometry.compiled`), or None: numpy alone.
+_kernels = KERNELS
+
+
 @dataclass(frozen=True, eq=False)
 class _Pairs:
     """The principal-contact tests of object features against environment features,
@@ -155,6 +160,33 @@ class _Pairs:
 
 def _pair_tests(world: World, V: FloatArray, D: FloatArray, Nn: FloatArray, j: IntArray | slice,
                 env_shape: tuple[int, ...], tol: float) -> _Pairs:
+    """:func:`_pair_tests_numpy`, by the compiled kernel where it is built
+    (:mod:`geometry.compiled`: the same operations on the same numbers, the same
+    results)."""
+    if _kernels is None:
+        return _pair_tests_numpy(world, V, D, Nn, j, env_shape, tol)
+    poly = world.object.polygon
+    env = world.environment
+    X, N = V.shape[:2]
+    Xe, Y = env_shape[0], env_shape[2]
+    arrive = env.vertex_edges[:, 0]
+    tables = np.stack([env.vertices[j, 0], env.vertices[j, 1], env.edge_directions[j, 0],
+                       env.edge_directions[j, 1], env.normals[j, 0], env.normals[j, 1], env.edge_lengths[j],
+                       env.edge_directions[arrive, 0][j], env.edge_directions[arrive, 1][j],
+                       env.edge_lengths[arrive][j]]).astype(float, copy=False)
+    shape = (X, N, Y)
+    u, s, lo, hi = (np.empty(shape) for _ in range(4))
+    ve, ev, ee = (np.empty(shape, dtype=bool) for _ in range(3))
+    c = np.ascontiguousarray
+    _kernels.pair_tests(c(V, dtype=float), c(D, dtype=float), c(Nn, dtype=float), X, N, Y, c(tables),
+                        c(env.vertex_convex[j], dtype=np.uint8), Xe, c(poly.edge_lengths, dtype=float),
+                        c(poly.convex_vertices, dtype=np.uint8), float(tol), float(EPS), u, s, lo, hi,
+                        ve.view(np.uint8), ev.view(np.uint8), ee.view(np.uint8))
+    return _Pairs(u, s, ve, ev, ee, lo, hi)
+
+
+def _pair_tests_numpy(world: World, V: FloatArray, D: FloatArray, Nn: FloatArray, j: IntArray | slice,
+                      env_shape: tuple[int, ...], tol: float) -> _Pairs:
     """:class:`_Pairs` of the object at ``V``, ``D``, ``Nn`` ((X, N, 2) each: vertices,
     edge directions, outward normals) against environment edges (and their start
     vertices) ``env.*[j]`` reshaped to ``env_shape`` ((1, 1, M) or (P, 1, 1))."""

@@ -53,7 +53,6 @@ import functools
 import itertools
 import logging
 import math
-import os
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -61,26 +60,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from geometry.compiled import KERNELS
 from geometry.errors import GeometryError
 from geometry.poses import BoolArray, FloatArray, Pose
 from geometry.tolerances import FEASIBILITY_MARGIN
 
 logger = logging.getLogger(__name__)
 
-#: The interface version of geometry/_cone.c this module calls (its ``API``).
-_KERNEL_API: int = 2
-
-try:  # the compiled cone test (geometry/_cone.c), built where a C compiler is found
-    from geometry import _cone as _cone_kernel
-except ImportError:  # pragma: no cover - an installation without a C compiler: numpy decides alone
-    _cone_kernel = None
-if os.environ.get("LDHP_TAMP_PURE_NUMPY", "") not in ("", "0"):  # numpy alone, to compare (docs/design/mechanics.md)
-    _cone_kernel = None
-if _cone_kernel is not None and getattr(_cone_kernel, "API", None) != _KERNEL_API:  # pragma: no cover
-    # an editable install whose extension predates the source: numpy decides until rebuilt
-    logger.warning("geometry._cone (%s) is out of date; numpy decides the cone tests until it is rebuilt "
-                   "(pip install -e .)", getattr(_cone_kernel, "__file__", "?"))
-    _cone_kernel = None
+#: The compiled cone test (:mod:`geometry.compiled`), or None: numpy decides alone.
+_kernels = KERNELS
 
 ModeArray = NDArray[np.int8]
 
@@ -920,12 +908,12 @@ def _contains_numpy(G: Gens, t: FloatArray) -> BoolArray:
 
 
 def _contains_compiled(G: Gens, t: FloatArray) -> BoolArray:
-    """:func:`_contains_numpy`'s rule in the compiled kernel (``geometry/_cone.c``): the
+    """:func:`_contains_numpy`'s rule in the compiled kernel (``geometry/_kernels.c``): the
     same operations on the same values, instance by instance, stopping at an instance's
     first certificate."""
     G = np.ascontiguousarray(G, dtype=float)
     out = np.empty(G.shape[2], dtype=bool)
-    _cone_kernel.contains(G[0], G[1], G[2], np.ascontiguousarray(t, dtype=float), out.view(np.uint8),
+    _kernels.contains(G[0], G[1], G[2], np.ascontiguousarray(t, dtype=float), out.view(np.uint8),
                           _CROSS_TOL, _DET_TOL, _DEGENERATE_TOL)
     return out
 
@@ -933,7 +921,7 @@ def _contains_compiled(G: Gens, t: FloatArray) -> BoolArray:
 def _contains(G: Gens, t: FloatArray) -> BoolArray:
     """Cone membership of a chunk: the compiled kernel where it is built and the chunk
     has at most its number of generator slots, otherwise numpy (both decide alike)."""
-    if _cone_kernel is not None and G.shape[1] <= _cone_kernel.MAX_SLOTS and G.shape[2]:
+    if _kernels is not None and G.shape[1] <= _kernels.MAX_SLOTS and G.shape[2]:
         return _contains_compiled(G, t)
     return _contains_numpy(G, t)
 
@@ -1002,15 +990,15 @@ def _feasible_impl(
     contacts: Contacts, com: FloatArray, inv_L: FloatArray, margin: FloatArray, mu_override: FloatArray | None = None
 ) -> BoolArray:
     """Feasibility of every instance: the compiled kernel (generators, shifted target and
-    cone test fused, ``geometry/_cone.c``) where it is built and takes the contact count,
+    cone test fused, ``geometry/_kernels.c``) where it is built and takes the contact count,
     otherwise :func:`_feasible_numpy` (both decide alike)."""
     B, C = contacts.batch, contacts.count
-    if _cone_kernel is not None and 0 < 2 * C <= _cone_kernel.MAX_SLOTS:
+    if _kernels is not None and 0 < 2 * C <= _kernels.MAX_SLOTS:
         mu = contacts.mu if mu_override is None else np.asarray(mu_override, dtype=float)
         if mu.shape == (B, C):
             out = np.empty(B, dtype=bool)
             c = np.ascontiguousarray
-            _cone_kernel.feasible(c(contacts.points), c(contacts.normals), c(mu), c(contacts.modes),
+            _kernels.feasible(c(contacts.points), c(contacts.normals), c(mu), c(contacts.modes),
                                   c(contacts.slide_dirs), c(com, dtype=float), c(inv_L, dtype=float),
                                   c(margin, dtype=float), out.view(np.uint8), _CHUNK, _MODE_CODES, MU_ZERO,
                                   _CROSS_TOL, _DET_TOL, _DEGENERATE_TOL)

@@ -1,14 +1,23 @@
 /*
- * geometry._cone: the compiled cone-membership test of geometry.mechanics.
+ * geometry._kernels: compiled twins of a few checks of the geometric backend, each
+ * making numpy's floating-point operations in numpy's order (built with
+ * -ffp-contract=off: no fused multiply-adds), so that both decide every input alike;
+ * tests pin each to its numpy rule (tests/geometry/test_kernels.py). geometry.compiled
+ * loads the module (or not: numpy decides alone).
  *
- * One function, contains(X, Y, Z, T, out, cross_tol, det_tol, degenerate_tol), decides
+ *  - contains(), feasible(): the cone test and the fused feasibility test of
+ *    geometry.mechanics (below);
+ *  - convex_overlap(): the exact-sign overlap of strictly convex polygons with a
+ *    target's boundary (geometry.collision._convex_vs_target_numpy);
+ *  - pair_tests(): the principal-contact tests of an object's features against the
+ *    environment's (geometry.contacts._pair_tests_numpy).
+ *
+ * The cone test. contains(X, Y, Z, T, out, cross_tol, det_tol, degenerate_tol) decides
  * for each instance i of a chunk whether the target T[:, i] lies in the cone of the
- * generators (X[k, i], Y[k, i], Z[k, i]), k < K. It is the rule of
- * geometry.mechanics._contains_numpy, instance by instance, with the same floating-point
- * operations in the same order (built with -ffp-contract=off: no fused multiply-adds), so
- * both decide every input alike; tests pin one to the other. What the compiled loop saves
- * is numpy's passes over whole arrays: an instance stops at its first certificate, and a
- * triple's determinant is computed only where its signs allow a certificate.
+ * generators (X[k, i], Y[k, i], Z[k, i]), k < K: the rule of
+ * geometry.mechanics._contains_numpy, instance by instance. What the compiled loops save
+ * is numpy's passes over whole arrays: a block of instances stops once all hold a
+ * certificate, and the block's working set stays in the L1 cache.
  *
  * The rule (geometry/mechanics.py, _reduce_to_ey and _contains_reduced):
  *  - map the instance linearly so that its target becomes a positive multiple of e_y
@@ -30,8 +39,8 @@
 #include <math.h>
 #include <string.h>
 
-/* the interface geometry.mechanics expects (its _KERNEL_API) */
-#define API_VERSION 2
+/* the interface geometry.compiled expects (its API) */
+#define API_VERSION 4
 
 /* the most generator slots a chunk may have (contacts x 2); more go to numpy */
 #define MAX_SLOTS 16
@@ -384,6 +393,230 @@ done:
     return result;
 }
 
+/*
+ * The overlap of strictly convex polygons with a target's boundary by exact orientation
+ * signs (geometry.collision._convex_vs_target's rule): for each polygon, every target
+ * edge whose bounding box meets the polygon's is tested with Shewchuk's filtered
+ * orient2d signs; a certain crossing, or a target edge whose start lies certainly
+ * inside the polygon, is a hit; a polygon none of whose edge pairs is a hit is decided
+ * (a miss) when every pair is certainly apart, and left undecided otherwise.
+ */
+static int
+orient_sign(double ax, double ay, double bx, double by, double cx, double cy, double err, double floor_)
+{
+    double left = (ax - cx) * (by - cy);
+    double right = (ay - cy) * (bx - cx);
+    double det = left - right;
+    double bound = err * (fabs(left) + fabs(right)) + floor_;
+    return (det > bound) - (det < -bound);
+}
+
+#define MAX_POLYGON 64
+
+static void
+convex_overlap(const double *P, Py_ssize_t B, Py_ssize_t V, const double *S, const double *E, const double *lo,
+               const double *hi, Py_ssize_t K, double err, double floor_, unsigned char *hit, unsigned char *decided)
+{
+    signed char oc[MAX_POLYGON], od[MAX_POLYGON], oa[MAX_POLYGON];
+    for (Py_ssize_t b = 0; b < B; b++) {
+        const double *A = P + b * V * 2;
+        double plox = A[0], ploy = A[1], phix = A[0], phiy = A[1];
+        for (Py_ssize_t i = 1; i < V; i++) {
+            double x = A[2 * i], y = A[2 * i + 1];
+            plox = x < plox ? x : plox;
+            phix = x > phix ? x : phix;
+            ploy = y < ploy ? y : ploy;
+            phiy = y > phiy ? y : phiy;
+        }
+        int any_hit = 0, unsure = 0;
+        for (Py_ssize_t k = 0; k < K && !any_hit; k++) {
+            if (!(lo[2 * k] <= phix && hi[2 * k] >= plox && lo[2 * k + 1] <= phiy && hi[2 * k + 1] >= ploy))
+                continue;
+            double cx = S[2 * k], cy = S[2 * k + 1], dx = E[2 * k], dy = E[2 * k + 1];
+            for (Py_ssize_t i = 0; i < V; i++) {
+                Py_ssize_t j = i + 1 < V ? i + 1 : 0;
+                double ax = A[2 * i], ay = A[2 * i + 1], bx = A[2 * j], by = A[2 * j + 1];
+                oc[i] = (signed char)orient_sign(ax, ay, bx, by, cx, cy, err, floor_);
+                od[i] = (signed char)orient_sign(ax, ay, bx, by, dx, dy, err, floor_);
+                oa[i] = (signed char)orient_sign(cx, cy, dx, dy, ax, ay, err, floor_);
+            }
+            int cross = 0, all_left = 1, apart = 1, some_right = 0;
+            for (Py_ssize_t i = 0; i < V; i++) {
+                int cd = oc[i] * od[i], ab = oa[i] * oa[i + 1 < V ? i + 1 : 0];
+                cross |= cd < 0 && ab < 0;
+                all_left &= oc[i] > 0;
+                apart &= cd > 0 || ab > 0;
+                some_right |= oc[i] < 0;
+            }
+            int pair_hit = cross || all_left;
+            int pair_miss = apart && some_right;
+            any_hit |= pair_hit;
+            unsure |= !pair_hit && !pair_miss;
+        }
+        hit[b] = (unsigned char)any_hit;
+        decided[b] = (unsigned char)(any_hit || !unsure);
+    }
+}
+
+static PyObject *
+convex_overlap_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    Py_buffer P, S, E, lo, hi, hit, decided;
+    Py_ssize_t V;
+    double err, floor_;
+    if (!PyArg_ParseTuple(args, "y*ny*y*y*y*w*w*dd", &P, &V, &S, &E, &lo, &hi, &hit, &decided, &err, &floor_))
+        return NULL;
+    PyObject *result = NULL;
+    Py_buffer *all[] = {&P, &S, &E, &lo, &hi, &hit, &decided};
+    Py_ssize_t D = (Py_ssize_t)sizeof(double), B = hit.len, K = S.len / D / 2;
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++) {
+        if (!PyBuffer_IsContiguous(all[q], 'C')) {
+            PyErr_SetString(PyExc_ValueError, "convex_overlap: buffers must be C-contiguous");
+            goto done;
+        }
+    }
+    if (V < 1 || V > MAX_POLYGON || P.len != B * V * 2 * D || decided.len != B || S.len != K * 2 * D
+        || E.len != S.len || lo.len != S.len || hi.len != S.len) {
+        PyErr_Format(PyExc_ValueError, "convex_overlap: polygons must be (B, V, 2) doubles with 1 <= V <= %d, "
+                     "target edges' starts, ends, lows and highs (K, 2) doubles, hit and decided B bytes",
+                     MAX_POLYGON);
+        goto done;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    convex_overlap(P.buf, B, V, S.buf, E.buf, lo.buf, hi.buf, K, err, floor_, hit.buf, decided.buf);
+    Py_END_ALLOW_THREADS
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
+        PyBuffer_Release(all[q]);
+    return result;
+}
+
+/*
+ * The principal-contact tests of an object's features against the environment's
+ * (geometry.contacts._pair_tests_numpy's rule): for each row x, object vertex / edge i and
+ * environment edge y, the vertex-edge, edge-vertex and edge-edge tests, with u, s and
+ * the edge-edge overlap interval. The environment's tables are (Xe, Y) with Xe = 1 (the
+ * same edges for every row: a dense frame) or Xe = X (one edge per row).
+ */
+enum { E_AX, E_AY, E_TX, E_TY, E_NX, E_NY, E_LE, E_TAX, E_TAY, E_LEA, E_TABLES };
+
+static inline double
+clip(double v, double lo, double hi)
+{
+    /* numpy.clip: minimum(maximum(v, lo), hi) */
+    double m = v > lo ? v : lo;
+    return m < hi ? m : hi;
+}
+
+static void
+pair_tests(const double *V, const double *D, const double *Nn, Py_ssize_t X, Py_ssize_t N, Py_ssize_t Y,
+           const double *env, const unsigned char *env_convex, Py_ssize_t Xe, const double *Lo,
+           const unsigned char *obj_convex, double tol, double eps, double *u_out, double *s_out, double *lo_out,
+           double *hi_out, unsigned char *ve_out, unsigned char *ev_out, unsigned char *ee_out)
+{
+    double tol2 = tol * tol;
+    Py_ssize_t ET = Xe * Y; /* one environment table's length */
+    for (Py_ssize_t x = 0; x < X; x++) {
+        const double *Vx = V + x * N * 2, *Dx = D + x * N * 2, *Nx = Nn + x * N * 2;
+        Py_ssize_t e0 = (Xe > 1 ? x : 0) * Y;
+        for (Py_ssize_t i = 0; i < N; i++) {
+            Py_ssize_t ip = i > 0 ? i - 1 : N - 1, in = i + 1 < N ? i + 1 : 0;
+            double vx = Vx[2 * i], vy = Vx[2 * i + 1], dx = Dx[2 * i], dy = Dx[2 * i + 1];
+            double nx = Nx[2 * i], ny = Nx[2 * i + 1];
+            double pdx = Dx[2 * ip], pdy = Dx[2 * ip + 1];
+            double qx = Vx[2 * in], qy = Vx[2 * in + 1]; /* v_(i+1): u and s at the edge's end */
+            double lo_i = Lo[i], lo_p = Lo[ip];
+            for (Py_ssize_t y = 0; y < Y; y++) {
+                Py_ssize_t e = e0 + y, at = (x * N + i) * Y + y;
+                double Ax = env[E_AX * ET + e], Ay = env[E_AY * ET + e];
+                double Tx = env[E_TX * ET + e], Ty = env[E_TY * ET + e];
+                double Nex = env[E_NX * ET + e], Ney = env[E_NY * ET + e];
+                double Le = env[E_LE * ET + e];
+                double Tax = env[E_TAX * ET + e], Tay = env[E_TAY * ET + e], Lea = env[E_LEA * ET + e];
+                /* vertex-edge: object vertex i vs environment edge y */
+                double rx = vx - Ax, ry = vy - Ay;
+                double u = rx * Tx + ry * Ty;
+                double s = rx * Nex + ry * Ney;
+                double uc = clip(u, 0.0, Le);
+                int near_ve = (u - uc) * (u - uc) + s * s <= tol2;
+                double nd_next = dx * Nex + dy * Ney;
+                double nd_prev = -(pdx * Nex + pdy * Ney);
+                int side_ve = nd_next >= -tol / lo_i && nd_prev >= -tol / lo_p;
+                ve_out[at] = (unsigned char)(near_ve && side_ve && obj_convex[i]);
+                /* edge-vertex: environment vertex y (the start of edge y) vs object edge i */
+                double wx = Ax - vx, wy = Ay - vy;
+                double eu = wx * dx + wy * dy;
+                double es = wx * nx + wy * ny;
+                double euc = clip(eu, 0.0, lo_i);
+                int near_ev = (eu - euc) * (eu - euc) + es * es <= tol2;
+                double nt_next = nx * Tx + ny * Ty;
+                double nt_prev = -(nx * Tax + ny * Tay);
+                int side_ev = nt_next >= -tol / Le && nt_prev >= -tol / Lea;
+                ev_out[at] = (unsigned char)(near_ev && side_ev && env_convex[e]);
+                /* edge-edge: object edge i (v_i -> v_(i+1)) vs environment edge y */
+                double qrx = qx - Ax, qry = qy - Ay;
+                double uQ = qrx * Tx + qry * Ty;
+                double sQ = qrx * Nex + qry * Ney;
+                int facing = nx * Nex + ny * Ney < 0.0;
+                double mn = u < uQ ? u : uQ, mx = u > uQ ? u : uQ;
+                double lo = mn > 0.0 ? mn : 0.0;
+                double hi = mx < Le ? mx : Le;
+                double denom = uQ - u;
+                int ok = facing && hi - lo > tol && fabs(denom) > eps;
+                double safe = ok ? denom : 1.0;
+                double s_lo = s + (sQ - s) * (lo - u) / safe;
+                double s_hi = s + (sQ - s) * (hi - u) / safe;
+                ee_out[at] = (unsigned char)(ok && fabs(s_lo) <= tol && fabs(s_hi) <= tol);
+                u_out[at] = u;
+                s_out[at] = s;
+                lo_out[at] = lo;
+                hi_out[at] = hi;
+            }
+        }
+    }
+}
+
+static PyObject *
+pair_tests_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    Py_buffer V, D, Nn, env, env_convex, Lo, obj_convex, u, s, lo, hi, ve, ev, ee;
+    Py_ssize_t X, N, Y, Xe;
+    double tol, eps;
+    if (!PyArg_ParseTuple(args, "y*y*y*nnny*y*ny*y*ddw*w*w*w*w*w*w*", &V, &D, &Nn, &X, &N, &Y, &env, &env_convex,
+                          &Xe, &Lo, &obj_convex, &tol, &eps, &u, &s, &lo, &hi, &ve, &ev, &ee))
+        return NULL;
+    PyObject *result = NULL;
+    Py_buffer *all[] = {&V, &D, &Nn, &env, &env_convex, &Lo, &obj_convex, &u, &s, &lo, &hi, &ve, &ev, &ee};
+    Py_ssize_t Dz = (Py_ssize_t)sizeof(double), cells = X * N * Y;
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++) {
+        if (!PyBuffer_IsContiguous(all[q], 'C')) {
+            PyErr_SetString(PyExc_ValueError, "pair_tests: buffers must be C-contiguous");
+            goto done;
+        }
+    }
+    if (X < 0 || N < 1 || Y < 0 || (Xe != 1 && Xe != X) || V.len != X * N * 2 * Dz || D.len != V.len
+        || Nn.len != V.len || env.len != E_TABLES * Xe * Y * Dz || env_convex.len != Xe * Y || Lo.len != N * Dz
+        || obj_convex.len != N || u.len != cells * Dz || s.len != u.len || lo.len != u.len || hi.len != u.len
+        || ve.len != cells || ev.len != cells || ee.len != cells) {
+        PyErr_SetString(PyExc_ValueError, "pair_tests: object arrays must be (X, N, 2) doubles, the environment's "
+                                          "tables (10, Xe, Y) doubles and (Xe, Y) bytes with Xe 1 or X, the "
+                                          "outputs (X, N, Y)");
+        goto done;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    pair_tests(V.buf, D.buf, Nn.buf, X, N, Y, env.buf, env_convex.buf, Xe, Lo.buf, obj_convex.buf, tol, eps, u.buf,
+               s.buf, lo.buf, hi.buf, ve.buf, ev.buf, ee.buf);
+    Py_END_ALLOW_THREADS
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
+        PyBuffer_Release(all[q]);
+    return result;
+}
+
 static PyObject *
 cone_contains_py(PyObject *Py_UNUSED(self), PyObject *args)
 {
@@ -431,20 +664,27 @@ static PyMethodDef methods[] = {
      "feasible(points, normals, mu, modes, slide_dirs, com, inv_L, margin, out, chunk, (sticking, rolling, "
      "sliding, penetrating), mu_zero, cross_tol, det_tol, degenerate_tol): out[i] = 1 iff instance i's weight is "
      "balanced with the margin (geometry.mechanics._feasible_impl's rule)."},
+    {"convex_overlap", convex_overlap_py, METH_VARARGS,
+     "convex_overlap(polygons, V, starts, ends, lows, highs, hit, decided, err, floor): the exact-sign overlap of "
+     "strictly convex polygons with a target's edges (geometry.collision._convex_vs_target's rule)."},
+    {"pair_tests", pair_tests_py, METH_VARARGS,
+     "pair_tests(V, D, Nn, X, N, Y, env_tables, env_convex, Xe, Lo, obj_convex, tol, eps, u, s, lo, hi, ve, ev, ee): "
+     "the principal-contact tests (geometry.contacts._pair_tests_numpy's rule)."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "geometry._cone",
+    PyModuleDef_HEAD_INIT, "geometry._kernels",
     "Compiled cone-membership test of geometry.mechanics (optional; numpy decides without it).",
     -1, methods, NULL, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC
-PyInit__cone(void)
+PyInit__kernels(void)
 {
     PyObject *m = PyModule_Create(&module);
     if (m != NULL && (PyModule_AddIntConstant(m, "MAX_SLOTS", MAX_SLOTS) < 0
+                      || PyModule_AddIntConstant(m, "MAX_POLYGON", MAX_POLYGON) < 0
                       || PyModule_AddIntConstant(m, "API", API_VERSION) < 0)) {
         Py_DECREF(m);
         return NULL;
