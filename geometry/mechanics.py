@@ -909,12 +909,12 @@ def _contains_numpy(G: Gens, t: FloatArray) -> BoolArray:
 
 def _contains_compiled(G: Gens, t: FloatArray) -> BoolArray:
     """:func:`_contains_numpy`'s rule in the compiled kernel (``geometry/_kernels.c``): the
-    same operations on the same values, instance by instance, stopping at an instance's
-    first certificate."""
+    same operations on the same values, in blocks of instances that stop once each of
+    their instances holds a certificate."""
     G = np.ascontiguousarray(G, dtype=float)
     out = np.empty(G.shape[2], dtype=bool)
     _kernels.contains(G[0], G[1], G[2], np.ascontiguousarray(t, dtype=float), out.view(np.uint8),
-                          _CROSS_TOL, _DET_TOL, _DEGENERATE_TOL)
+                      _CROSS_TOL, _DET_TOL, _DEGENERATE_TOL)
     return out
 
 
@@ -999,9 +999,9 @@ def _feasible_impl(
             out = np.empty(B, dtype=bool)
             c = np.ascontiguousarray
             _kernels.feasible(c(contacts.points), c(contacts.normals), c(mu), c(contacts.modes),
-                                  c(contacts.slide_dirs), c(com, dtype=float), c(inv_L, dtype=float),
-                                  c(margin, dtype=float), out.view(np.uint8), _CHUNK, _MODE_CODES, MU_ZERO,
-                                  _CROSS_TOL, _DET_TOL, _DEGENERATE_TOL)
+                              c(contacts.slide_dirs), c(com, dtype=float), c(inv_L, dtype=float),
+                              c(margin, dtype=float), out.view(np.uint8), _CHUNK, _MODE_CODES, MU_ZERO,
+                              _CROSS_TOL, _DET_TOL, _DEGENERATE_TOL)
             return out
     return _feasible_numpy(contacts, com, inv_L, margin, mu_override)
 
