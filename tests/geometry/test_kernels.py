@@ -33,7 +33,8 @@ def _compiler_found() -> bool:
     return bool(cc) and shutil.which(cc[0]) is not None
 
 
-kernel = pytest.mark.skipif(mech._kernels is None, reason="the compiled kernels are not built, or LDHP_TAMP_PURE_NUMPY leaves them out")
+kernel = pytest.mark.skipif(mech._kernels is None,
+                            reason="the compiled kernels are not built, or LDHP_TAMP_PURE_NUMPY leaves them out")
 
 
 def test_the_kernel_is_built_where_a_compiler_is() -> None:
