@@ -510,6 +510,23 @@ clip(double v, double lo, double hi)
     return m < hi ? m : hi;
 }
 
+/* a point at (along, across) from a segment's start, in the segment's frame, lies within
+   sqrt(tol2) of the segment of that length */
+static inline int
+near_segment(double along, double across, double length, double tol2)
+{
+    double c = clip(along, 0.0, length);
+    return (along - c) * (along - c) + across * across <= tol2;
+}
+
+/* both features leaving a contact point stay on the free side of the other's line: each
+   far end (at lengths la, lb) at most tol below it */
+static inline int
+free_side(double a, double la, double b, double lb, double tol)
+{
+    return a >= -tol / la && b >= -tol / lb;
+}
+
 static void
 pair_tests(const double *V, const double *D, const double *Nn, Py_ssize_t X, Py_ssize_t N, Py_ssize_t Y,
            const double *env, const unsigned char *env_convex, Py_ssize_t Xe, const double *Lo,
@@ -539,22 +556,18 @@ pair_tests(const double *V, const double *D, const double *Nn, Py_ssize_t X, Py_
                 double rx = vx - Ax, ry = vy - Ay;
                 double u = rx * Tx + ry * Ty;
                 double s = rx * Nex + ry * Ney;
-                double uc = clip(u, 0.0, Le);
-                int near_ve = (u - uc) * (u - uc) + s * s <= tol2;
                 double nd_next = dx * Nex + dy * Ney;
                 double nd_prev = -(pdx * Nex + pdy * Ney);
-                int side_ve = nd_next >= -tol / lo_i && nd_prev >= -tol / lo_p;
-                ve_out[at] = (unsigned char)(near_ve && side_ve && obj_convex[i]);
+                ve_out[at] = (unsigned char)(near_segment(u, s, Le, tol2)
+                                             && free_side(nd_next, lo_i, nd_prev, lo_p, tol) && obj_convex[i]);
                 /* edge-vertex: environment vertex y (the start of edge y) vs object edge i */
                 double wx = Ax - vx, wy = Ay - vy;
                 double eu = wx * dx + wy * dy;
                 double es = wx * nx + wy * ny;
-                double euc = clip(eu, 0.0, lo_i);
-                int near_ev = (eu - euc) * (eu - euc) + es * es <= tol2;
                 double nt_next = nx * Tx + ny * Ty;
                 double nt_prev = -(nx * Tax + ny * Tay);
-                int side_ev = nt_next >= -tol / Le && nt_prev >= -tol / Lea;
-                ev_out[at] = (unsigned char)(near_ev && side_ev && env_convex[e]);
+                ev_out[at] = (unsigned char)(near_segment(eu, es, lo_i, tol2)
+                                             && free_side(nt_next, Le, nt_prev, Lea, tol) && env_convex[e]);
                 /* edge-edge: object edge i (v_i -> v_(i+1)) vs environment edge y */
                 double qrx = qx - Ax, qry = qy - Ay;
                 double uQ = qrx * Tx + qry * Ty;

@@ -166,23 +166,39 @@ def _pair_tests(world: World, V: FloatArray, D: FloatArray, Nn: FloatArray, j: I
     if _kernels is None:
         return _pair_tests_numpy(world, V, D, Nn, j, env_shape, tol)
     poly = world.object.polygon
-    env = world.environment
     X, N = V.shape[:2]
     Xe, Y = env_shape[0], env_shape[2]
-    arrive = env.vertex_edges[:, 0]
-    tables = np.stack([env.vertices[j, 0], env.vertices[j, 1], env.edge_directions[j, 0],
-                       env.edge_directions[j, 1], env.normals[j, 0], env.normals[j, 1], env.edge_lengths[j],
-                       env.edge_directions[arrive, 0][j], env.edge_directions[arrive, 1][j],
-                       env.edge_lengths[arrive][j]]).astype(float, copy=False)
+    tables, convex = _env_tables(world)
+    if not isinstance(j, slice):  # one edge per row
+        tables, convex = np.take(tables, j, axis=1), np.take(convex, j)
     shape = (X, N, Y)
     u, s, lo, hi = (np.empty(shape) for _ in range(4))
     ve, ev, ee = (np.empty(shape, dtype=bool) for _ in range(3))
     c = np.ascontiguousarray
     _kernels.pair_tests(c(V, dtype=float), c(D, dtype=float), c(Nn, dtype=float), X, N, Y, c(tables),
-                        c(env.vertex_convex[j], dtype=np.uint8), Xe, c(poly.edge_lengths, dtype=float),
-                        c(poly.convex_vertices, dtype=np.uint8), float(tol), float(EPS), u, s, lo, hi,
+                        c(convex).view(np.uint8), Xe, c(poly.edge_lengths, dtype=float),
+                        c(poly.convex_vertices).view(np.uint8), float(tol), float(EPS), u, s, lo, hi,
                         ve.view(np.uint8), ev.view(np.uint8), ee.view(np.uint8))
     return _Pairs(u, s, ve, ev, ee, lo, hi)
+
+
+def _env_tables(world: World) -> tuple[FloatArray, BoolArray]:
+    """The environment's tables as the compiled :func:`_pair_tests` reads them (cached per
+    world): a (10, M) array of every edge's start vertex (x, y), direction, outward normal
+    and length, and the arriving edge's direction and length at its start vertex; and
+    the (M,) convexity of the start vertices."""
+    hit = _ENV_TABLES.get(world)
+    if hit is None:
+        env = world.environment
+        arrive = env.vertex_edges[:, 0]
+        T, Le = env.edge_directions, env.edge_lengths
+        tables = np.stack([env.vertices[:, 0], env.vertices[:, 1], T[:, 0], T[:, 1], env.normals[:, 0],
+                           env.normals[:, 1], Le, T[arrive, 0], T[arrive, 1], Le[arrive]]).astype(float)
+        hit = _ENV_TABLES[world] = (tables, np.ascontiguousarray(env.vertex_convex, dtype=bool))
+    return hit
+
+
+_ENV_TABLES: "weakref.WeakKeyDictionary[World, tuple[FloatArray, BoolArray]]" = weakref.WeakKeyDictionary()
 
 
 def _pair_tests_numpy(world: World, V: FloatArray, D: FloatArray, Nn: FloatArray, j: IntArray | slice,

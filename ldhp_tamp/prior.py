@@ -70,6 +70,9 @@ class Outcomes:
         """Posterior mean of the acceptance probability (uniform prior)."""
         return (self.accepted + 1) / (self.accepted + self.refused + 2)
 
+    def to_json(self) -> dict[str, int]:
+        return {"accepted": self.accepted, "refused": self.refused}
+
     def __add__(self, other: "Outcomes") -> "Outcomes":
         return Outcomes(self.accepted + other.accepted, self.refused + other.refused)
 
@@ -101,7 +104,7 @@ class TransitionPrior:
     def to_json(self) -> dict[str, Any]:
         return {"format": PRIOR_FORMAT, "fit_on": list(self.fit_on), "plans": self.plans,
                 "defer_below": self.defer_below,
-                "transitions": {k: {"accepted": v.accepted, "refused": v.refused} for k, v in self.transitions.items()}}
+                "transitions": {k: v.to_json() for k, v in self.transitions.items()}}
 
 
 def outcomes_from_stats(extra: Mapping[str, Any], source: str = "<stats>") -> dict[str, Outcomes]:

@@ -42,7 +42,7 @@ from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Failure, FailureCause, FailureTier, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family
 from ldhp_tamp.primitives.registry import Sequel, Transition
-from ldhp_tamp.prior import STATS_KEY as PRIOR_STATS_KEY, TransitionPrior
+from ldhp_tamp.prior import STATS_KEY as PRIOR_STATS_KEY, Outcomes, TransitionPrior
 from ldhp_tamp.scenario import Scenario
 from ldhp_tamp.streams import PathSearch, PosePath, StreamStats
 from ldhp_tamp.validate import support_analysis, validate_plan
@@ -210,8 +210,7 @@ class _Counters:
 
 def _stats(engine: str, c: _Counters, clock: _Clock) -> PlanStats:
     extra: dict[str, object] = {"pose_paths": c.pose_paths, "judge_rejections": c.judge_rejections,
-                                PRIOR_STATS_KEY: {k: {"accepted": a, "refused": r}
-                                                  for k, (a, r) in sorted(c.outcomes.items())}}
+                                PRIOR_STATS_KEY: {k: Outcomes(a, r).to_json() for k, (a, r) in sorted(c.outcomes.items())}}
     if c.deferred is not None:
         extra["prior_deferred"] = c.deferred
         extra["prior_relaxed"] = c.prior_relaxed
