@@ -1,11 +1,12 @@
 """Independent work of one solve on the machine's cores, in forked children.
 
 Two tools. :func:`fork_map` applies a function to a list of items: the parent process
-takes one share, each other core a forked child, which inherits everything the parent
-has built (the world, the contact states, the grasp set) for free and sends only its
-results back through a pipe, pickled. It serves the setup's transition sweeps, hundreds
-of small independent computations of a few milliseconds each; a pool of workers would
-have to be sent the world first and would cost more than it saves. :class:`Helper` is
+and a forked child per other core claim the items one at a time as each gets free; a
+child inherits everything the parent has built (the world, the contact states, the
+grasp set) for free and sends only its results back through a pipe, pickled. It serves
+the setup's transition sweeps, hundreds of small independent computations of a few
+milliseconds each, in batches; a pool of workers would have to be sent the world first
+and would cost more than it saves. :class:`Helper` is
 one long-lived child for work that comes one piece at a time (the bottom tier's G_m and
 G_T, the streams' sweeps): the solve hands it the next piece and computes the current
 one itself.
@@ -55,33 +56,35 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, 
     """``[fn(x) for x in items]``, spread over ``jobs`` processes (default: the cores),
     each with at least ``min_items_per_core`` items (fewer processes otherwise).
 
-    Item i goes to process ``i % jobs`` (the parent is process 0), so that neighbouring
-    items, which tend to cost alike, are spread out.
+    The processes claim the items one at a time, in order, as each becomes free (from a
+    pipe of tokens they share): a child that waits for a core on a busy machine leaves
+    its items to the parent, which only ever waits for the items a child has started.
     """
     items = list(items)
     jobs = cores() if jobs is None else max(1, int(jobs))
     jobs = min(jobs, len(items) // max(1, int(min_items_per_core)))
     if jobs <= 1 or not hasattr(os, "fork"):
         return [fn(x) for x in items]
+    tokens = _tokens(len(items))
     children: list[tuple[int, int]] = []  # (pid, read end)
     try:
-        for j in range(1, jobs):
+        for _ in range(1, jobs):
             read_end, write_end = os.pipe()
             pid = os.fork()
             if pid == 0:  # the child: never returns
                 try:
                     os.close(read_end)
-                    _child(write_end, fn, items[j::jobs])
+                    _child(write_end, fn, items, tokens)
                 finally:
                     os._exit(0)
             os.close(write_end)
             children.append((pid, read_end))
-        mine = [fn(x) for x in items[0::jobs]]
-        shares: list[list[R]] = [mine]
-        for j, (pid, read_end) in enumerate(children, start=1):
-            children[j - 1] = (pid, -1)  # _collect closes, reaps (and kills if need be)
-            shares.append(_collect(pid, read_end, len(items[j::jobs])))
+        done = dict(_claimed(fn, items, tokens))
+        for j, (pid, read_end) in enumerate(children):
+            children[j] = (pid, -1)  # _collect closes, reaps (and kills if need be)
+            done.update(_collect(pid, read_end))
     finally:
+        os.close(tokens)
         for pid, read_end in children:  # what is left: interrupted
             if read_end >= 0:
                 with contextlib.suppress(OSError):
@@ -90,17 +93,44 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, 
                     os.kill(pid, signal.SIGKILL)
                 with contextlib.suppress(ChildProcessError):
                     os.waitpid(pid, 0)
-    out: list[R] = [None] * len(items)  # type: ignore[list-item]
-    for j, share in enumerate(shares):
-        out[j::jobs] = share
+    if len(done) != len(items):
+        raise RuntimeError(f"the worker processes of the solve returned {len(done)} results, not {len(items)}")
+    return [done[i] for i in range(len(items))]
+
+
+#: Bytes of one token of :func:`_tokens` (an item's index, little-endian).
+_TOKEN = 4
+
+
+def _tokens(n: int) -> int:
+    """The read end of a pipe holding the tokens 0, 1, ..., n - 1 and closed for writing:
+    reading one claims that item (reads of a pipe are whole, under its lock), an empty
+    read means none is left. ``n`` is at most 16384 (a pipe holds 64 KiB)."""
+    if n * _TOKEN > 1 << 16:
+        raise ValueError(f"fork_map: at most {(1 << 16) // _TOKEN} items, got {n}")
+    read_end, write_end = os.pipe()
+    try:
+        os.write(write_end, b"".join(i.to_bytes(_TOKEN, "little") for i in range(n)))
+    finally:
+        os.close(write_end)
+    return read_end
+
+
+def _claimed(fn: Callable[[T], R], items: Sequence[T], tokens: int) -> list[tuple[int, R]]:
+    """``(i, fn(items[i]))`` for each item this process claims, until none is left."""
+    out = []
+    while token := os.read(tokens, _TOKEN):
+        i = int.from_bytes(token, "little")
+        out.append((i, fn(items[i])))
     return out
 
 
-def _child(write_end: int, fn: Callable[[T], R], share: Sequence[T]) -> None:
-    """A child's work: its share of the results, or what went wrong, pickled to the pipe."""
+def _child(write_end: int, fn: Callable[[T], R], items: Sequence[T], tokens: int) -> None:
+    """A child's work: the items it claims with their results, or what went wrong (it
+    then claims no more), pickled to the pipe."""
     signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the parent's alarm is the parent's
     with os.fdopen(write_end, "wb") as pipe:
-        pipe.write(_pickled(_outcome(lambda: [fn(x) for x in share])))
+        pipe.write(_pickled(_outcome(lambda: _claimed(fn, items, tokens))))
 
 
 def _outcome(call: Callable[[], object]) -> tuple[str, object]:
@@ -137,7 +167,7 @@ def _answer(message: tuple[str, object], who: str) -> object:
     return payload
 
 
-def _collect(pid: int, read_end: int, expected: int) -> list[R]:
+def _collect(pid: int, read_end: int) -> list[tuple[int, R]]:
     """Read a child's pickled answer to the end, reap it, return its results or raise."""
     chunks = []
     done = False
@@ -155,8 +185,6 @@ def _collect(pid: int, read_end: int, expected: int) -> list[R]:
         raise RuntimeError(f"a worker process of the solve died (wait status {status})")
     payload = _answer(pickle.loads(b"".join(chunks)), "a worker process of the solve")
     assert isinstance(payload, list)
-    if len(payload) != expected:
-        raise RuntimeError(f"a worker process of the solve returned {len(payload)} results, not {expected}")
     return payload
 
 

@@ -4,6 +4,7 @@ and leaves no process behind."""
 from __future__ import annotations
 
 import os
+import time
 
 import pytest
 
@@ -31,15 +32,55 @@ def _children() -> set[int]:
     return out
 
 
+def _wait_for(marker, seconds: float = 60.0) -> None:
+    """Until ``marker`` exists (a child has claimed an item), at most ``seconds``."""
+    t_end = time.monotonic() + seconds
+    while not marker.exists():
+        assert time.monotonic() < t_end, "no child process claimed an item"
+        time.sleep(0.001)
+
+
+def _child_does(parent: int, marker, in_child, in_parent=lambda x: x):
+    """A function for fork_map whose first call in the parent waits until a child has
+    claimed an item (so that a child surely computes one): ``in_child(x)`` there,
+    ``in_parent(x)`` here."""
+    def fn(x):
+        if os.getpid() == parent:
+            _wait_for(marker)
+            return in_parent(x)
+        marker.touch()
+        return in_child(x)
+    return fn
+
+
 @needs_fork
 @pytest.mark.parametrize("jobs", [1, 2, 3, 5])
-def test_results_are_the_serial_ones_in_order(jobs: int) -> None:
+def test_results_are_the_serial_ones_in_order(jobs: int, tmp_path) -> None:
     before = _children()
     items = list(range(101))
-    pids = set(fork_map(lambda x: os.getpid(), items, jobs))
     assert fork_map(lambda x: (x, x * x, {x % 7}), items, jobs) == [(x, x * x, {x % 7}) for x in items]
-    assert len(pids) == min(jobs, len(items) // parallel.MIN_ITEMS_PER_CORE)  # the work was shared
+    # each item computed by exactly one process, whoever claims it
+    log = tmp_path / "log"
+    def fn(x):
+        fd = os.open(log, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
+        try:
+            os.write(fd, f"{x} {os.getpid()}\n".encode())
+        finally:
+            os.close(fd)
+        return x
+    assert fork_map(fn, items, jobs) == items
+    lines = [line.split() for line in log.read_text().splitlines()]
+    assert sorted(int(x) for x, _ in lines) == items
+    assert len({pid for _, pid in lines}) <= min(jobs, len(items) // parallel.MIN_ITEMS_PER_CORE, 5)
     assert _children() <= before
+
+
+@needs_fork
+def test_the_children_share_the_work(tmp_path) -> None:
+    me = os.getpid()
+    pids = fork_map(_child_does(me, tmp_path / "claimed", lambda x: os.getpid(), lambda x: os.getpid()),
+                    range(64), 2)
+    assert me in pids and len(set(pids)) == 2
 
 
 @needs_fork
@@ -49,16 +90,18 @@ def test_few_items_stay_in_the_parent() -> None:
 
 
 @needs_fork
-def test_fewer_items_per_core_may_be_asked_for() -> None:
+def test_fewer_items_per_core_may_be_asked_for(tmp_path) -> None:
     """A few large items (the setup's batches of sweeps) are shared out too."""
+    me = os.getpid()
     items = list(range(6))
-    assert len(set(fork_map(lambda x: os.getpid(), items, 2, min_items_per_core=3))) == 2
+    fn = _child_does(me, tmp_path / "claimed", lambda x: os.getpid(), lambda x: os.getpid())
+    assert len(set(fork_map(fn, items, 2, min_items_per_core=3))) == 2
     assert fork_map(lambda x: x * x, items, 2, min_items_per_core=3) == [x * x for x in items]
     assert set(fork_map(lambda x: os.getpid(), items, 2, min_items_per_core=4)) == {os.getpid()}
 
 
 @needs_fork
-def test_a_childs_exception_is_raised_in_the_parent() -> None:
+def test_a_childs_exception_is_raised_in_the_parent(tmp_path) -> None:
     before = _children()
     def fail_on(bad: int):
         def fn(x: int) -> int:
@@ -67,43 +110,69 @@ def test_a_childs_exception_is_raised_in_the_parent() -> None:
             return x
         return fn
 
-    with pytest.raises(ValueError, match="item 33"):  # 33 % 2 == 1: the child's share
+    with pytest.raises(ValueError, match="item 33"):  # whoever claims it
         fork_map(fail_on(33), range(64), 2)
-    with pytest.raises(ValueError, match="item 32"):  # the parent's share; the child is killed
-        fork_map(fail_on(32), range(64), 2)
+    def in_child(x: int) -> int:
+        raise ValueError(f"item {x}, in a child")
+
+    with pytest.raises(ValueError, match="in a child"):  # after the parent's share
+        fork_map(_child_does(os.getpid(), tmp_path / "claimed", in_child), range(64), 2)
     assert _children() <= before
 
 
 @needs_fork
-def test_a_timeout_in_a_child_keeps_its_stage() -> None:
+def test_an_exception_in_the_parent_kills_the_children(tmp_path) -> None:
     before = _children()
-    def fn(x: int) -> int:
-        if x == 5:
-            raise TimeBudgetExceeded("the setup (tip transitions)")
+    def hang(x):
+        time.sleep(60.0)
         return x
 
+    def boom(x):
+        raise ValueError("the parent's item")
+
+    t0 = time.monotonic()
+    with pytest.raises(ValueError, match="the parent's item"):
+        fork_map(_child_does(os.getpid(), tmp_path / "claimed", hang, boom), range(64), 2)
+    assert time.monotonic() - t0 < 30.0  # the hanging child was not waited for
+    assert _children() <= before
+
+
+@needs_fork
+def test_a_timeout_in_a_child_keeps_its_stage(tmp_path) -> None:
+    before = _children()
+    def late(x: int) -> int:
+        raise TimeBudgetExceeded("the setup (tip transitions)")
+
     with pytest.raises(TimeBudgetExceeded) as info:
-        fork_map(fn, range(64), 2)
+        fork_map(_child_does(os.getpid(), tmp_path / "claimed", late), range(64), 2)
     assert info.value.where == "the setup (tip transitions)"
     assert _children() <= before
 
 
 @needs_fork
-def test_unpicklable_errors_and_results_are_reported() -> None:
+def test_unpicklable_errors_and_results_are_reported(tmp_path) -> None:
     before = _children()
     class Local(Exception):  # a local class: not picklable
         pass
 
-    def fn(x: int) -> int:
-        if x == 3:
-            raise Local("boom")
-        return x
+    def boom(x: int) -> int:
+        raise Local("boom")
 
     with pytest.raises(RuntimeError, match="Local: boom"):
-        fork_map(fn, range(64), 2)
+        fork_map(_child_does(os.getpid(), tmp_path / "a", boom), range(64), 2)
     with pytest.raises(RuntimeError, match="cannot be pickled"):
-        fork_map(lambda x: (lambda: x), range(64), 2)  # a child's lambdas
+        fork_map(_child_does(os.getpid(), tmp_path / "b", lambda x: (lambda: x)), range(64), 2)  # a child's lambdas
     assert _children() <= before
+
+
+def test_too_many_items_for_the_tokens_are_refused() -> None:
+    with pytest.raises(ValueError, match="at most 16384 items"):
+        parallel._tokens(16385)
+    read_end = parallel._tokens(16384)
+    try:
+        assert os.read(read_end, 8) == (0).to_bytes(4, "little") + (1).to_bytes(4, "little")
+    finally:
+        os.close(read_end)
 
 
 def _add(state, x):
