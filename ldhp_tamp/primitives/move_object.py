@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import TYPE_CHECKING, Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator, Sequence
 
 import numpy as np
 
@@ -50,13 +50,17 @@ MARGIN_MM = 2.0
 #: coarser than a stream's, since only the order of the states met matters there.
 TRANSITION_STEP_MM = 3.0
 #: Sweeps walked side by side (:func:`geometry.kinematics.sweep_many`) when finding the
-#: admissible transitions, about; and how many batches make a forked process worth it.
-#: A forked child costs about 0.1 s of CPU time here (its copies of the pages the
-#: parent's objects share), and on a loaded machine it waits for a core: task 2's 484
-#: sweeps (0.7 s of CPU in batches) took 0.7-1.1 s in one process and 1.4-2.0 s forked
-#: at load 3 on 2 cores.
-TRANSITION_BATCH = 64
-TRANSITION_BATCHES_PER_CORE = 4
+#: admissible transitions, about: the batches that the cores claim one at a time
+#: (:func:`ldhp_tamp.parallel.fork_map`).
+TRANSITION_BATCH = 32
+#: Fewest sweeps of one primitive worth a forked process. A forked child costs about
+#: 0.1 s of CPU time here (its copies of the pages the parent's objects share) and
+#: 5-10 ms of the parent's; task 2's primitives have 88-240 sweeps each (0.16-0.4 s in
+#: one process), task 1's 20-30 (0.02-0.04 s). The batches are claimed as the processes
+#: get free, so a child that waits for a core on a loaded machine leaves them to the
+#: parent (an earlier static split made the parent wait for it: task 2's sweeps took
+#: 1.4-2.0 s forked at load 3 on 2 cores, 0.7-1.1 s in one process).
+TRANSITION_FORK_MIN = 64
 
 #: Largest orientation error (mm of vertex motion at the object's radius) an air-move
 #: leaves at its end: the in-state alignment's tolerance, far below the plan spec's 1 mm.
@@ -148,6 +152,63 @@ def _sense_name(sense: int) -> str:
     return "ccw" if sense > 0 else "cw"
 
 
+def swept_transitions(ctx: PlanningContext, prims: Sequence["_Swept"]
+                      ) -> list[set[tuple[ContactState, ContactState]]]:
+    """The admissible transitions of each sweep-based primitive of ``prims``: the pairs of
+    consecutive states along one sweep per (non-free state, witness pose, motion family of
+    the primitive), and on through a vertex-on-vertex instant under the primitive's
+    motion from there.
+
+    The sweeps are independent of each other: every primitive's go into one list, walked
+    side by side in batches (:func:`geometry.kinematics.sweep_many`, the same sweeps
+    whatever the batch), the batches claimed by the machine's cores
+    (:func:`ldhp_tamp.parallel.fork_map`: one forked child for all the primitives).
+    """
+    where = f"the setup ({', '.join(p.name for p in prims)} transitions)"
+    jobs: list[tuple[int, Motion, float]] = []  # (primitive, motion, s_max)
+    for i, prim in enumerate(prims):
+        for state in ctx.states:
+            budget.check(ctx.deadline, where)
+            if not state.is_free:
+                jobs += [(i, motion, s_max) for pose in ctx.witness_poses(state)
+                         for motion, s_max, _ in prim.families(ctx, pose)]
+    nodes = ctx.state_set
+
+    def pairs_from(batch: list[tuple[int, Motion, float]]) -> list[set[tuple[ContactState, ContactState]]]:
+        budget.check(ctx.deadline, where)
+        found: list[set[tuple[ContactState, ContactState]]] = [set() for _ in prims]
+        onward: list[tuple[Motion, float]] = []
+        onward_of: list[tuple[int, ContactState, ContactState]] = []  # (primitive, a, x) of each onward job
+        sweeps = sweep_many(ctx.world, [(m, s_max) for _, m, s_max in batch], step_mm=TRANSITION_STEP_MM,
+                            refine_bits=10)
+        for (i, _, _), sw in zip(batch, sweeps):
+            found[i] |= _consecutive_pairs(sw)
+            transit = _transit(sw, nodes)
+            if transit is not None:  # on through a vertex-on-vertex instant, under another motion law
+                a, x, s_x = transit
+                for motion, s_max, _ in prims[i].families(ctx, sw.motion.pose(s_x)):
+                    onward.append((motion, s_max))
+                    onward_of.append((i, a, x))
+        budget.check(ctx.deadline, where)
+        for (i, a, x), after in zip(onward_of, sweep_many(ctx.world, onward, step_mm=TRANSITION_STEP_MM,
+                                                          refine_bits=10)):
+            b = _onward(ctx.world, after, x, nodes)
+            if b is not None and b != a:
+                found[i].add((a, b))
+        return found
+
+    # Batches of about TRANSITION_BATCH sweeps (every n-th job in each: neighbours, of
+    # one state and primitive, tend to cost alike), claimed by the cores when there are
+    # enough.
+    n = max(1, math.ceil(len(jobs) / TRANSITION_BATCH))
+    out: list[set[tuple[ContactState, ContactState]]] = [set() for _ in prims]
+    for found in fork_map(pairs_from, [jobs[i::n] for i in range(n)],
+                          None if len(jobs) >= TRANSITION_FORK_MIN else 1, min_items_per_core=1):
+        for pairs, more in zip(out, found):
+            pairs |= more
+    return out
+
+
 class _Swept:
     """Shared machinery of the sweep-based MoveObject primitives."""
 
@@ -157,48 +218,14 @@ class _Swept:
         raise NotImplementedError
 
     def transitions(self, ctx: PlanningContext) -> set[tuple[ContactState, ContactState]]:
-        # One sweep per (witness pose, motion family), independent of each other: swept
-        # side by side in batches (geometry.kinematics.sweep_many), the batches on the
-        # machine's cores (ldhp_tamp.parallel; the same pairs on any number of them).
-        where = f"the setup ({self.name} transitions)"
-        motions = []
-        for state in ctx.states:
-            budget.check(ctx.deadline, where)
-            if not state.is_free:
-                motions += [(motion, s_max) for pose in ctx.witness_poses(state)
-                            for motion, s_max, _ in self.families(ctx, pose)]
+        return swept_transitions(ctx, [self])[0]
 
-        nodes = ctx.state_set
-
-        def pairs_from(jobs: list[tuple[Motion, float]]) -> set[tuple[ContactState, ContactState]]:
-            budget.check(ctx.deadline, where)
-            found: set[tuple[ContactState, ContactState]] = set()
-            onward: list[tuple[Motion, float]] = []
-            onward_of: list[tuple[ContactState, ContactState]] = []  # (a, x) of each onward job
-            for sw in sweep_many(ctx.world, jobs, step_mm=TRANSITION_STEP_MM, refine_bits=10):
-                found |= _consecutive_pairs(sw)
-                transit = _transit(sw, nodes)
-                if transit is not None:  # on through a vertex-on-vertex instant, under another motion law
-                    a, x, s_x = transit
-                    for motion, s_max, _ in self.families(ctx, sw.motion.pose(s_x)):
-                        onward.append((motion, s_max))
-                        onward_of.append((a, x))
-            budget.check(ctx.deadline, where)
-            for (a, x), after in zip(onward_of, sweep_many(ctx.world, onward, step_mm=TRANSITION_STEP_MM,
-                                                           refine_bits=10)):
-                b = _onward(ctx.world, after, x, nodes)
-                if b is not None and b != a:
-                    found.add((a, b))
-            return found
-
-        # Batches of about TRANSITION_BATCH sweeps (every n-th job in each: neighbours, of
-        # one state, tend to cost alike), on the cores when each gets several.
-        n = max(1, math.ceil(len(motions) / TRANSITION_BATCH))
-        pairs: set[tuple[ContactState, ContactState]] = set()
-        for found in fork_map(pairs_from, [motions[i::n] for i in range(n)],
-                              min_items_per_core=TRANSITION_BATCHES_PER_CORE):
-            pairs |= found
-        return pairs
+    @staticmethod
+    def transitions_together(ctx: PlanningContext, prims: Sequence["_Swept"]
+                             ) -> list[set[tuple[ContactState, ContactState]]]:
+        """The transitions of several sweep-based primitives at once (the registry asks
+        the implementations sharing this function together): :func:`swept_transitions`."""
+        return swept_transitions(ctx, prims)
 
     def sample(self, ctx: PlanningContext, from_state: ContactState, to_state: ContactState,
                start_pose: Pose, rng: np.random.Generator, limit: int) -> Iterator[Segment | tuple[Segment, ...]]:

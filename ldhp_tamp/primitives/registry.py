@@ -367,14 +367,34 @@ class PrimitiveRegistry:
     ) -> dict[str, frozenset[tuple[ContactState, ContactState]]]:
         """Ask every MoveObject implementation of the domain for its admissible transitions.
 
+        Implementations with the same ``transitions_together`` attribute (a function of
+        the context and a list of implementations that returns their transitions, in
+        order) are asked in one call: the sweep-based primitives share one batch of
+        sweeps on the machine's cores that way. The others are asked one by one
+        (``transitions``).
+
         Returns
         -------
         dict
             Action name -> admissible ``(from_state, to_state)`` pairs: the
-            ``transitions`` of a :class:`~ldhp_tamp.symbolic.ContactGraph`.
+            ``transitions`` of a :class:`~ldhp_tamp.symbolic.ContactGraph`, in the
+            domain's order of the actions.
         """
-        return {b.name: frozenset(b.implementation.transitions(context))
-                for b in self.bound(domain, Family.MOVE_OBJECT)}
+        bound = list(self.bound(domain, Family.MOVE_OBJECT))
+        found: dict[str, frozenset[tuple[ContactState, ContactState]]] = {}
+        together: dict[Callable[..., Any], list[Binding]] = {}
+        for b in bound:
+            fn = getattr(b.implementation, "transitions_together", None)
+            if fn is None:
+                found[b.name] = frozenset(b.implementation.transitions(context))
+            else:
+                together.setdefault(fn, []).append(b)
+        for fn, group in together.items():
+            pairs = fn(context, [b.implementation for b in group])
+            if len(pairs) != len(group):
+                raise RuntimeError(f"transitions_together returned {len(pairs)} sets for {len(group)} actions")
+            found.update((b.name, frozenset(p)) for b, p in zip(group, pairs))
+        return {b.name: found[b.name] for b in bound}
 
 
 def check_against_domain(domain: DomainInfo, registry: PrimitiveRegistry) -> None:

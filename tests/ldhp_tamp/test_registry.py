@@ -149,6 +149,38 @@ def test_admissible_transitions_asks_every_move_object_implementation():
                            "air-move": frozenset({(V2, FREE), (FREE, V2)})}
 
 
+class FakeSwept(FakeMove):
+    """MoveObject implementations whose transitions are found together, in one call."""
+
+    calls: list[tuple[object, tuple[str, ...]]] = []
+
+    def __init__(self, name: str, pairs: tuple[tuple[ContactState, ContactState], ...]) -> None:
+        super().__init__(pairs)
+        self.name = name
+
+    def transitions(self, context):  # pragma: no cover - the registry asks them together
+        raise AssertionError("asked alone")
+
+    @staticmethod
+    def transitions_together(context, impls):
+        FakeSwept.calls.append((context, tuple(i.name for i in impls)))
+        return [set(i.pairs) for i in impls]
+
+
+def test_implementations_sharing_transitions_together_are_asked_in_one_call():
+    FakeSwept.calls = []
+    domain = DomainInfo("toy", "toy.pddl", (move("tip"), move("air-move"), move("push"), grasp("open")))
+    reg = PrimitiveRegistry()
+    reg.bind("tip", Family.MOVE_OBJECT, FakeSwept("tip", ((L1, V2),)))
+    reg.bind("air-move", Family.MOVE_OBJECT, FakeMove(((V2, FREE), (FREE, V2))))
+    reg.bind("push", Family.MOVE_OBJECT, FakeSwept("push", ((V2, L1),)))
+    transitions = reg.admissible_transitions(domain, context="ctx")
+    assert FakeSwept.calls == [("ctx", ("tip", "push"))]  # one call, in the domain's order
+    assert list(transitions) == ["tip", "air-move", "push"]
+    assert transitions == {"tip": frozenset({(L1, V2)}), "air-move": frozenset({(V2, FREE), (FREE, V2)}),
+                           "push": frozenset({(V2, L1)})}
+
+
 def test_domain_info_lookups():
     assert DOMAIN.names(Family.MOVE_OBJECT) == ("tip", "air-move")
     assert DOMAIN.names() == ("tip", "air-move", "open")

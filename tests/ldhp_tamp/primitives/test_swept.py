@@ -11,7 +11,7 @@ import numpy as np
 
 from geometry.contacts import contact_state
 from ldhp_tamp.contact_graph import build_context
-from ldhp_tamp.primitives.move_object import BiplanarSlide, Push
+from ldhp_tamp.primitives.move_object import BiplanarSlide, Push, Tip
 from ldhp_tamp.scenario import load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[3] / "scenarios"
@@ -78,3 +78,20 @@ def test_a_stand_up_slide_is_streamed_to_where_it_completes() -> None:
     assert angles[0] < 100.0  # the goal-ranked ones stay
     unranked = list(BiplanarSlide().sample(ctx, lying, standing, sc.start, np.random.default_rng(0), 30))
     assert len(unranked) > 3  # there are more, ranked before the far end
+
+
+def test_the_primitives_found_together_are_each_ones_own(monkeypatch) -> None:
+    """swept_transitions puts every primitive's sweeps in one list of batches (claimed by
+    the cores from 64 sweeps on): each primitive gets the pairs it finds alone, forked or
+    not, whatever the batch size."""
+    from ldhp_tamp.primitives import move_object
+
+    ctx, _ = _slot()
+    prims = [Tip(), Push(), BiplanarSlide()]
+    alone = [p.transitions(ctx) for p in prims]
+    assert all(alone) and len({frozenset(a) for a in alone}) == 3
+    assert move_object.swept_transitions(ctx, prims) == alone
+    for batch, fork_min in ((7, 1), (1000, 10**9)):  # many forked batches; one batch in this process
+        monkeypatch.setattr(move_object, "TRANSITION_BATCH", batch)
+        monkeypatch.setattr(move_object, "TRANSITION_FORK_MIN", fork_min)
+        assert move_object.swept_transitions(ctx, prims) == alone
