@@ -1688,11 +1688,20 @@ def _turn_radius(ctx: AdjustContext, rows: IntArray, finger: int, centre: FloatA
     """Mean distance from ``centre`` of the two fingers' anchors of grasps ``rows`` at
     ``width`` with finger ``finger``'s anchor kept (what :meth:`GripperMotion.travel`
     takes for the turn)."""
-    g = ctx.grasps.gripper[rows]
-    ex = np.stack([np.cos(g[:, 2]), np.sin(g[:, 2])], axis=1)
+    phi = ctx.grasps.gripper[rows, 2]
     kept = ctx.anchors[rows, finger]
-    other = kept + ((1.0 if finger == 0 else -1.0) * width)[:, None] * ex
-    return 0.5 * (np.linalg.norm(kept - centre, axis=1) + np.linalg.norm(other - centre, axis=1))
+    kx, ky = kept[:, 0], kept[:, 1]
+    cx, cy = centre[:, 0], centre[:, 1]
+    w = (1.0 if finger == 0 else -1.0) * width
+    ox, oy = kx + w * np.cos(phi), ky + w * np.sin(phi)
+    return 0.5 * (_hypot(kx - cx, ky - cy) + _hypot(ox - cx, oy - cy))
+
+
+def _hypot(x: FloatArray, y: FloatArray) -> FloatArray:
+    """``np.linalg.norm(np.stack([x, y], axis=1), axis=1)`` without the stack, to the
+    bit: numpy's norm adds the squares (two of them: one addition, in either order) and
+    takes the root; ``np.hypot`` rounds otherwise."""
+    return np.sqrt(x * x + y * y)
 
 
 @REGISTRY.register("slide", Family.ADJUST_GRASP)
@@ -1737,7 +1746,8 @@ class Slide(_AdjustGrasp):
             if k == 1:
                 s = s[~gs.touching[s, 0]]
             a, b = _group_pairs(ctx.slide_groups[k], s)
-            travel = np.linalg.norm(gs.gripper[b, :2] - gs.gripper[a, :2], axis=1)
+            x, y = gs.gripper[:, 0], gs.gripper[:, 1]
+            travel = _hypot(x[b] - x[a], y[b] - y[a])
             keep = (a != b) & (travel <= ctx.options.slide_max_travel)
             hit = ctx._cache[key] = (a[keep], b[keep], travel[keep])
         return hit
