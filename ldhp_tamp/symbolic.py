@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import bisect
 import contextlib
+import copy
 import enum
 import logging
 import os
@@ -82,6 +83,7 @@ __all__ = [
     "check_engine",
     "emit_pddl",
     "load_checked_domain",
+    "prepare_pddl_reader",
     "load_domain",
     "parse_domain",
     "solve",
@@ -406,12 +408,42 @@ def _no_packrat() -> Iterator[None]:
             setattr(ParserElement, name, value)
 
 
+#: unified-planning's PDDL reader of each environment, whose grammar (pyparsing elements,
+#: 0.02 s to build) is made once per process: a parse reads with a copy of it.
+_READERS: dict[int, tuple[Environment, PDDLReader]] = {}
+
+
+def prepare_pddl_reader() -> None:
+    """Build unified-planning's PDDL grammar for the global environment now, not in the
+    first parse: what a sweep's worker processes do once, with their imports
+    (:mod:`ldhp_tamp.solver_preload`)."""
+    _reader(_environment())
+
+
+def _reader(env: Environment) -> PDDLReader:
+    """A PDDL reader of ``env`` for one parse: a copy of the environment's first one.
+
+    The grammar's elements keep nothing of a parse (packrat memoization is off while
+    parsing, :func:`_no_packrat`); the reader's one attribute a parse sets, the
+    ``total-cost`` fluent it found, starts unset in each copy. Should a version of
+    unified-planning not have that attribute, every parse gets a new reader."""
+    hit = _READERS.get(id(env))
+    if hit is None or hit[0] is not env:
+        hit = _READERS[id(env)] = (env, PDDLReader(env))
+    template = hit[1]
+    if not hasattr(template, "_totalcost"):
+        return PDDLReader(env)
+    reader = copy.copy(template)
+    reader._totalcost = None
+    return reader
+
+
 def _parse(env: Environment, domain_text: str, problem_text: str | None,
            source: str) -> up_model.Problem:
     try:
         with warnings.catch_warnings(), _no_packrat():
             warnings.simplefilter("ignore")
-            return PDDLReader(env).parse_problem_string(domain_text, problem_text)
+            return _reader(env).parse_problem_string(domain_text, problem_text)
     except TimeBudgetExceeded:  # the solve's alarm interrupted the parse: not the domain's fault
         raise
     except Exception as exc:  # the reader raises pyparsing, SyntaxError, UP and others

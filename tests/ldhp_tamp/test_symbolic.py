@@ -403,6 +403,30 @@ def test_engine_ignoring_costs_is_refused_for_a_cost_domain():
         solve(problem, engine="pyperplan")
 
 
+def test_a_parse_keeps_nothing_of_the_one_before(monkeypatch):
+    """Each parse reads with a copy of one reader per environment (the grammar is built
+    once): a cost domain, then one without costs, then the cost domain again read as by
+    fresh readers."""
+    from unified_planning.io import PDDLReader
+
+    from ldhp_tamp import symbolic
+
+    costs, plain = (DATA / "costs.pddl").read_text(), (domains_dir() / "ldhp.pddl").read_text()
+    shared = [parse_domain(t) for t in (costs, plain, costs)]
+    assert [d.uses_action_costs for d in shared] == [True, False, True]
+    env = symbolic._environment()
+    assert symbolic._READERS[id(env)][0] is env
+    template = symbolic._READERS[id(env)][1]
+    assert template._totalcost is None  # the copies took the parses' state, not it
+    made = []
+    monkeypatch.setattr(symbolic, "_READERS", {})
+    monkeypatch.setattr(symbolic, "_reader", lambda e: made.append(1) or PDDLReader(e))
+    fresh = [parse_domain(t) for t in (costs, plain, costs)]
+    assert len(made) == 5  # a cost domain is read twice (parse_domain)
+    for a, b in zip(shared, fresh):
+        assert (a.template, a.kind, a.info, a.uses_action_costs) == (b.template, b.kind, b.info, b.uses_action_costs)
+
+
 @needs_fd
 def test_fast_downward_honours_costs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
