@@ -304,7 +304,7 @@ def test_an_alarm_during_the_domain_parse_is_a_timeout_not_a_domain_error(monkey
         def parse_problem_string(self, domain_text, problem_text):
             raise TimeBudgetExceeded("ldhp_tamp.symbolic._parse (interrupted: it has no deadline checks of its own)")
 
-    monkeypatch.setattr(symbolic, "PDDLReader", Interrupted)
+    monkeypatch.setattr(symbolic, "_reader", Interrupted)  # each parse's reader
     with pytest.raises(TimeBudgetExceeded, match="symbolic._parse"):
         symbolic.load_domain("ldhp")
 
