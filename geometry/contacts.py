@@ -68,6 +68,7 @@ __all__ = [
     "workspace_for_task",
     "relevant_features",
     "enumerate_contact_states",
+    "row_groups",
 ]
 
 logger = logging.getLogger(__name__)
@@ -930,6 +931,36 @@ def _farthest_points(x: FloatArray, k: int) -> IntArray:
     return np.array(chosen, dtype=np.int64)
 
 
+def row_groups(keys: IntArray) -> tuple[IntArray, IntArray]:
+    """Equal rows of integer ``keys`` (N, M; signed or unsigned) grouped: each row's
+    group id and each group's first row (by index), the ids numbering the distinct rows
+    in lexicographic order: what ``np.unique(keys, axis=0, return_inverse=True,
+    return_index=True)`` gives, by a sort of the columns (``np.unique`` sorts the rows as
+    records: several times slower)."""
+    n = keys.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    order = np.lexsort(keys.T[::-1])  # stable: equal rows in index order
+    srt = keys[order]
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    new[1:] = (srt[1:] != srt[:-1]).any(axis=1)
+    ids = np.cumsum(new) - 1
+    inv = np.empty(n, dtype=np.int64)
+    inv[order] = ids
+    return inv, order[new]
+
+
+def _byte_words(rows: NDArray[np.uint8]) -> NDArray[np.uint64]:
+    """(N, B) bytes as (N, ceil(B / 8)) unsigned integers (big-endian, zero-padded), whose
+    lexicographic order is the rows' order byte by byte: :func:`row_groups` of them is
+    ``np.unique(rows, axis=0)``'s grouping and numbering."""
+    n, b = rows.shape
+    padded = np.zeros((n, -(-b // 8) * 8), dtype=np.uint8)
+    padded[:, :b] = rows
+    return padded.view(">u8").astype(np.uint64)
+
+
 def enumerate_contact_states(
     world: World,
     workspace: Workspace,
@@ -1069,25 +1100,24 @@ def enumerate_contact_states(
                            masks.edge_edge[keep].reshape(poses.shape[0], -1)], axis=1)
     if poses.shape[0] == 0:
         return ()
-    packed = np.packbits(bits, axis=1)
-    keys, inverse = np.unique(packed, axis=0, return_inverse=True)
-    inverse = inverse.ravel()
+    inverse, firsts = row_groups(_byte_words(np.packbits(bits, axis=1)))  # np.unique(axis=0)'s groups
+    n_groups = firsts.size
     kept_masks = ContactMasks(masks.vertex_edge[keep], masks.edge_vertex[keep], masks.edge_edge[keep])
 
     scale = world.object.polygon.radius
     results: list[StateWitness] = []
     budget = 512
     by_group = np.lexsort((poses[:, 2], inverse))  # group, then theta
-    bounds = np.searchsorted(inverse[by_group], np.arange(keys.shape[0] + 1))
+    bounds = np.searchsorted(inverse[by_group], np.arange(n_groups + 1))
     # First an even subsample over theta of each group (one overlap test for all of
     # them), then the rest of a group in chunks until one is valid.
-    orders = [by_group[bounds[g]:bounds[g + 1]] for g in range(keys.shape[0])]
+    orders = [by_group[bounds[g]:bounds[g + 1]] for g in range(n_groups)]
     firsts = [np.arange(0, order.size, max(1, order.size // budget)) for order in orders]
     first_sel = [order[first] for order, first in zip(orders, firsts)]
     first_free = ~object_env_overlap(world, poses[np.concatenate(first_sel)], penetration_tol) \
         if first_sel else np.zeros(0, dtype=bool)
     first_at = np.concatenate([[0], np.cumsum([sel.size for sel in first_sel])])
-    for g in range(keys.shape[0]):
+    for g in range(n_groups):
         order, first = orders[g], firsts[g]
         witnesses: IntArray = first_sel[g][first_free[first_at[g]:first_at[g + 1]]]
         if not witnesses.size:

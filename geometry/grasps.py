@@ -36,6 +36,7 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from geometry import collision, contacts, mechanics
+from geometry.contacts import row_groups
 from geometry.errors import GeometryError
 from geometry.poses import BoolArray, IntArray, Pose, compose_batch, transform_points, wrap_angle
 from geometry.shapes import FloatArray, Polygon
@@ -927,26 +928,6 @@ def _keys(rows: _Rows) -> IntArray:
     cols = [g[:, 0] / q, g[:, 1] / q, np.cos(g[:, 2]) / q, np.sin(g[:, 2]) / q, rows.width / q]
     k = np.rint(np.stack(cols, axis=1)).astype(np.int64)
     return np.concatenate([k, rows.part.astype(np.int64)], axis=1)
-
-
-def row_groups(keys: IntArray) -> tuple[IntArray, IntArray]:
-    """Equal rows of integer ``keys`` (N, M) grouped: each row's group id and each
-    group's first row (by index), the ids numbering the distinct rows in lexicographic
-    order: what ``np.unique(keys, axis=0, return_inverse=True, return_index=True)``
-    gives, by a sort of the columns (``np.unique`` sorts the rows as records: several
-    times slower)."""
-    n = keys.shape[0]
-    if n == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    order = np.lexsort(keys.T[::-1])  # stable: equal rows in index order
-    srt = keys[order]
-    new = np.empty(n, dtype=bool)
-    new[0] = True
-    new[1:] = (srt[1:] != srt[:-1]).any(axis=1)
-    ids = np.cumsum(new) - 1
-    inv = np.empty(n, dtype=np.int64)
-    inv[order] = ids
-    return inv, order[new]
 
 
 def _object_free(world: World, rows: _Rows, tol: float) -> _Rows:

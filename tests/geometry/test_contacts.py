@@ -298,3 +298,18 @@ def test_sparse_masks_equal_the_dense_frame(tol: float) -> None:
         assert dense.counts.sum() > len(sure) // 2
         for kind in ("vertex_edge", "edge_vertex", "edge_edge"):
             np.testing.assert_array_equal(getattr(sparse, kind), getattr(dense, kind))
+
+
+def test_byte_rows_group_as_numpys_unique_rows() -> None:
+    """The contact-state enumeration groups its packed masks by ``row_groups`` of their
+    bytes read as big-endian words: ``np.unique(axis=0)``'s groups, numbered alike (bytes
+    of every value, row widths that are no multiple of 8)."""
+    from geometry.contacts import _byte_words, row_groups
+
+    rng = np.random.default_rng(5)
+    for width in (1, 7, 8, 12, 17):
+        rows = rng.choice(np.array([0, 1, 127, 128, 255], dtype=np.uint8), (3000, width))
+        keys, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+        inv, firsts = row_groups(_byte_words(rows))
+        assert np.array_equal(inv, inverse.ravel()) and np.array_equal(firsts, first)
+        assert firsts.size == keys.shape[0]
