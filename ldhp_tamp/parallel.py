@@ -223,6 +223,11 @@ class Helper:
     def alive(self) -> bool:
         return self._pid > 0
 
+    @property
+    def idle(self) -> bool:
+        """Alive, and no call pending: :meth:`submit` may be called."""
+        return self.alive and not self._pending
+
     def submit(self, fn: Callable[..., R], *args: object) -> None:
         """Send ``fn(state, *args)`` to the child (one call at a time)."""
         if not self.alive or self._pending:

@@ -31,13 +31,16 @@ import numpy as np
 from geometry.contacts import rests_alone
 from geometry.grasps import GraspOptions, enumerate_grasps
 from geometry.kinematics import dense_parameters
+from geometry.shapes import FloatArray
 from geometry.tolerances import WAYPOINT_STEP
+from geometry.world import World
 from ldhp_tamp import budget, symbolic
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
 from ldhp_tamp.errors import TimeBudgetExceeded
 from ldhp_tamp.executability import forward_check
 from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanResult, GraspPlanStatus
+from ldhp_tamp.parallel import Helper
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Failure, FailureCause, FailureTier, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family
@@ -45,7 +48,8 @@ from ldhp_tamp.primitives.registry import Sequel, Transition
 from ldhp_tamp.prior import STATS_KEY as PRIOR_STATS_KEY, Outcomes, TransitionPrior
 from ldhp_tamp.scenario import Scenario
 from ldhp_tamp.streams import PathSearch, PosePath, StreamStats
-from ldhp_tamp.validate import support_analysis, validate_plan
+from ldhp_tamp.validate import (PlanArrays, SupportAnalysis, press_table, support_analysis, support_analysis_of,
+                                validate_plan)
 
 log = logging.getLogger(__name__)
 
@@ -255,10 +259,12 @@ def _give_up(scenario: Scenario, engine: str, after: str, c: _Counters, clock: _
     return _failed(scenario, engine, best, c, clock, headline=f"{best.headline}{after}")
 
 
-def _annotate(plan: Plan, scenario: Scenario) -> Plan:
+def _annotate(plan: Plan, scenario: Scenario, analysis: SupportAnalysis | None = None) -> Plan:
     """``plan`` with each waypoint's ``finger_forces`` and, in its stats, the support
-    margin, where it is least and the largest finger force (``validate.support_analysis``)."""
-    a = support_analysis(plan, scenario, worst_only=True)
+    margin, where it is least and the largest finger force (``analysis``, the plan's
+    ``validate.support_analysis(plan, scenario, worst_only=True)``, computed here when
+    ``None``)."""
+    a = analysis if analysis is not None else support_analysis(plan, scenario, worst_only=True)
     forces = iter(a.finger_forces.tolist())
     steps = tuple(replace(s, waypoints=tuple(
         replace(w, finger_forces=tuple(None if np.isnan(f).any() else (f[0], f[1]) for f in next(forces)))
@@ -346,7 +352,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
 
     # the streams' sweeps, two at a time, with the bottom tier's helper once it has one
     ctx = replace(ctx, helper=grasp_planner.live_helper)
-    judge = _Judge(scenario, engine, options.simulate, c, clock)
+    judge = _Judge(scenario, engine, options.simulate, c, clock, helper=grasp_planner.live_helper)
     # The transitions a prior rates unlikely to pass the bottom tier: left out of the plans
     # until no plan is left without them.
     deferred: set[Transition] = set()
@@ -443,7 +449,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                     for t in planned:
                         c.record(t.label, True)
                     plan = _annotate(Plan(FORMAT, scenario.name, scenario.sha256, PlanStatus.SOLVED, outcome.steps,
-                                          _stats(engine, c, clock)), scenario)
+                                          _stats(engine, c, clock)), scenario, judge.support_of(outcome.steps))
                     say(f"solved in {clock.as_dict()['total']:.2f} s")
                     return SolveResult(SolveStatus.SOLVED, plan)
                 c.attempts.append(replace(
@@ -564,19 +570,56 @@ class Verdict:
         return self.step is None
 
 
+def _helper_support(state: object, flat: PlanArrays, press: FloatArray, world: World) -> SupportAnalysis:
+    """The helper process's call: a plan's support analysis (:meth:`_Judge.__call__`)."""
+    return support_analysis_of(flat, press, world, worst_only=True)
+
+
 class _Judge:
     """Decides whether a grasp plan's steps make a plan that executes: the validator's
     rules 0-9 on every output waypoint (the motion's contact modes, the force limit),
     with the scenario's own friction; the forward problem (the commanded finger motion
     makes the planned object motion and no other, :mod:`ldhp_tamp.executability`); then,
-    when asked, the physics simulation."""
+    when asked, the physics simulation.
 
-    def __init__(self, scenario: Scenario, engine: str, simulate: bool, c: _Counters, clock: _Clock):
+    Meanwhile the bottom tier's helper process, when one is idle, computes the support
+    analysis that annotates a plan the judge accepts (:func:`_annotate`;
+    :meth:`support_of`): the solve's last stage, on the other core.
+    """
+
+    def __init__(self, scenario: Scenario, engine: str, simulate: bool, c: _Counters, clock: _Clock,
+                 helper: Callable[[], Helper | None] = lambda: None):
         self.scenario, self.engine, self.simulate, self.c, self.clock = scenario, engine, simulate, c, clock
+        self.helper = helper
+        self._support: tuple[tuple[Step, ...], SupportAnalysis] | None = None
+
+    def support_of(self, steps: tuple[Step, ...]) -> SupportAnalysis | None:
+        """The support analysis of the steps the judge last accepted, if these are they and
+        the helper computed it."""
+        return self._support[1] if self._support is not None and self._support[0] is steps else None
 
     def __call__(self, steps: tuple[Step, ...]) -> Verdict:
         plan = Plan(FORMAT, self.scenario.name, self.scenario.sha256, PlanStatus.SOLVED, steps,
                     _stats(self.engine, self.c, self.clock))
+        self._support = None
+        helper = self.helper()
+        if helper is not None and not helper.idle:
+            helper = None
+        if helper is not None:
+            helper.submit(_helper_support, PlanArrays.of(plan), press_table(plan), self.scenario.world)
+        try:
+            verdict = self._verdict(plan, steps)
+        except BaseException:
+            if helper is not None:
+                helper.close()  # its answer is not wanted (the bottom tier starts another helper)
+            raise
+        if helper is not None:
+            analysis = helper.result()
+            if verdict.ok:
+                self._support = (steps, analysis)
+        return verdict
+
+    def _verdict(self, plan: Plan, steps: tuple[Step, ...]) -> Verdict:
         report = validate_plan(plan, self.scenario)
         if not report.valid:
             first = min((v for v in report.violations if v.step is not None), key=lambda v: v.step or 0,

@@ -69,7 +69,7 @@ from ldhp_tamp.scenario import Scenario, find_domain
 
 __all__ = ["RULES", "SLIP_TOL", "SUPPORT_ROUNDS", "PlanArrays", "PlanContacts", "SupportAnalysis", "ValidationReport",
            "Violation", "domain_actions", "finger_offsets", "format_violation", "plan_contacts", "present_groups", "press_table",
-           "pressed_support", "rotate_vectors", "support_analysis", "validate_plan"]
+           "pressed_support", "rotate_vectors", "support_analysis", "support_analysis_of", "validate_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -734,15 +734,21 @@ def support_analysis(plan: Plan, scenario: Scenario, rounds: int = SUPPORT_ROUND
     >>> round(a.margin, 4), a.worst_at, round(a.largest_finger_force, 3)
     (1.0, (2, 1), 8.175)
     """
-    world = scenario.world
-    flat = PlanArrays.of(plan)
+    return support_analysis_of(PlanArrays.of(plan), press_table(plan), scenario.world, rounds,
+                               worst_only=worst_only)
+
+
+def support_analysis_of(flat: PlanArrays, press: FloatArray, world: World, rounds: int = SUPPORT_ROUNDS, *,
+                        worst_only: bool = False) -> SupportAnalysis:
+    """:func:`support_analysis` of a plan's waypoints (:meth:`PlanArrays.of`), presses
+    (:func:`press_table`) and the scenario's world: plain arrays, which a helper process
+    is sent (a plan's steps hold read-only mappings, which do not pickle)."""
     n_wp = len(flat)
     need = np.full(n_wp, np.inf)
     forces = np.full((n_wp, 2, 2), np.nan)
     largest = np.full(n_wp, np.nan)
     max_force = getattr(world.gripper, "max_force", None)
     scale = world.object.length_scale
-    press = press_table(plan)
     floor = [-math.inf]  # worst_only: a lower bound of the worst waypoint's value
     for b in _support_batches(world, flat):
         g = b.rows

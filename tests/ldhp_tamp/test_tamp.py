@@ -419,3 +419,49 @@ def test_a_rest_window_narrower_than_the_samples_is_found_between_them() -> None
     assert _window_cut(a) is None and _window_cut(b) is None  # the window now ends both halves
     with pytest.raises(ValueError):
         seg.split(value=seg.s1 + 0.1)
+
+
+def test_the_judge_has_the_helper_compute_the_annotation(monkeypatch) -> None:
+    """While the judge checks a plan, an idle helper process computes the support analysis
+    that annotates it: the same as computed here; kept only for the steps accepted; a
+    busy helper is left alone; an interrupted judge closes the helper."""
+    from dataclasses import replace
+
+    from ldhp_tamp import tamp
+    from ldhp_tamp.parallel import Helper
+    from ldhp_tamp.validate import support_analysis
+
+    sc = load_scenario(scenarios_dir() / "example_pick.toml")
+    res = solve(sc, SolveOptions(helpers=False))
+    assert res.status is SolveStatus.SOLVED
+    steps = tuple(res.plan.steps)
+    here = support_analysis(res.plan, sc, worst_only=True)
+    helper = Helper(None)
+    try:
+        judge = tamp._Judge(sc, "pyperplan", False, tamp._Counters(), tamp._Clock(), helper=lambda: helper)
+        assert judge(steps).ok and helper.idle
+        there = judge.support_of(steps)
+        assert there is not None and judge.support_of(tuple(steps)) is there  # the same tuple: no copy
+        assert judge.support_of(steps[:-1]) is None
+        for name in ("friction_needed", "finger_forces", "max_finger_force", "step", "waypoint"):
+            assert np.array_equal(getattr(there, name), getattr(here, name), equal_nan=True)
+        assert (there.margin, there.worst_at) == (here.margin, here.worst_at)
+        annotated = tamp._annotate(res.plan, sc, there)
+        assert annotated == tamp._annotate(res.plan, sc)
+
+        broken = steps[:1] + (replace(steps[1], waypoints=steps[1].waypoints[::-1]),) + steps[2:]
+        assert not judge(broken).ok and judge.support_of(broken) is None and helper.idle
+
+        helper.submit(tamp._helper_support, *([None] * 3))  # busy: a call of someone else's
+        assert judge(steps).ok and judge.support_of(steps) is None
+        with pytest.raises(Exception):
+            helper.result()
+
+        def interrupted(plan, steps):
+            raise tamp.TimeBudgetExceeded("the judge")
+        monkeypatch.setattr(judge, "_verdict", interrupted)
+        with pytest.raises(tamp.TimeBudgetExceeded):
+            judge(steps)
+        assert not helper.alive
+    finally:
+        helper.close()
