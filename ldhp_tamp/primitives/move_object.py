@@ -51,7 +51,7 @@ MARGIN_MM = 2.0
 TRANSITION_STEP_MM = 3.0
 #: Sweeps walked side by side (:func:`geometry.kinematics.sweep_many`) when finding the
 #: admissible transitions, about: the batches that the cores claim one at a time
-#: (:func:`ldhp_tamp.parallel.fork_map`).
+#: (:func:`ldhp_tamp.parallel.fork_map`). Without a fork, all the sweeps are one batch.
 TRANSITION_BATCH = 32
 #: Fewest sweeps of one primitive worth a forked process. A forked child costs about
 #: 0.1 s of CPU time here (its copies of the pages the parent's objects share) and
@@ -199,11 +199,11 @@ def swept_transitions(ctx: PlanningContext, prims: Sequence["_Swept"]
 
     # Batches of about TRANSITION_BATCH sweeps (every n-th job in each: neighbours, of
     # one state and primitive, tend to cost alike), claimed by the cores when there are
-    # enough.
-    n = max(1, math.ceil(len(jobs) / TRANSITION_BATCH))
+    # enough; else one batch, in this process.
+    fork = len(jobs) >= TRANSITION_FORK_MIN
+    n = max(1, math.ceil(len(jobs) / TRANSITION_BATCH)) if fork else 1
     out: list[set[tuple[ContactState, ContactState]]] = [set() for _ in prims]
-    for found in fork_map(pairs_from, [jobs[i::n] for i in range(n)],
-                          None if len(jobs) >= TRANSITION_FORK_MIN else 1, min_items_per_core=1):
+    for found in fork_map(pairs_from, [jobs[i::n] for i in range(n)], None if fork else 1, min_items_per_core=1):
         for pairs, more in zip(out, found):
             pairs |= more
     return out
