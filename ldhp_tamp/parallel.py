@@ -54,7 +54,7 @@ def cores() -> int:
 def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, *,
              min_items_per_core: int = MIN_ITEMS_PER_CORE) -> list[R]:
     """``[fn(x) for x in items]``, spread over ``jobs`` processes (default: the cores),
-    each with at least ``min_items_per_core`` items (fewer processes otherwise).
+    no more processes than there are ``min_items_per_core`` items for each.
 
     The processes claim the items one at a time, in order, as each becomes free (from a
     pipe of tokens they share): a child that waits for a core on a busy machine leaves

@@ -83,9 +83,9 @@ __all__ = [
     "check_engine",
     "emit_pddl",
     "load_checked_domain",
-    "prepare_pddl_reader",
     "load_domain",
     "parse_domain",
+    "prepare_pddl_reader",
     "solve",
 ]
 

@@ -53,13 +53,14 @@ TRANSITION_STEP_MM = 3.0
 #: admissible transitions, about: the batches that the cores claim one at a time
 #: (:func:`ldhp_tamp.parallel.fork_map`). Without a fork, all the sweeps are one batch.
 TRANSITION_BATCH = 32
-#: Fewest sweeps of one primitive worth a forked process. A forked child costs about
-#: 0.1 s of CPU time here (its copies of the pages the parent's objects share) and
-#: 5-10 ms of the parent's; task 2's primitives have 88-240 sweeps each (0.16-0.4 s in
-#: one process), task 1's 20-30 (0.02-0.04 s). The batches are claimed as the processes
-#: get free, so a child that waits for a core on a loaded machine leaves them to the
-#: parent (an earlier static split made the parent wait for it: task 2's sweeps took
-#: 1.4-2.0 s forked at load 3 on 2 cores, 0.7-1.1 s in one process).
+#: Fewest sweeps (of all the sweep-based primitives together) worth a forked process. A
+#: forked child costs about 0.1 s of CPU time here (its copies of the pages the parent's
+#: objects share) and 5-10 ms of the parent's; task 2 has 484 sweeps (its primitives
+#: 88-240 each, 0.16-0.4 s in one process), task 1 50 (0.02-0.04 s a primitive). The
+#: batches are claimed as the processes get free, so a child that waits for a core on a
+#: loaded machine leaves them to the parent (an earlier static split made the parent
+#: wait for it: task 2's sweeps took 1.4-2.0 s forked at load 3 on 2 cores, 0.7-1.1 s in
+#: one process).
 TRANSITION_FORK_MIN = 64
 
 #: Largest orientation error (mm of vertex motion at the object's radius) an air-move
@@ -161,8 +162,9 @@ def swept_transitions(ctx: PlanningContext, prims: Sequence["_Swept"]
 
     The sweeps are independent of each other: every primitive's go into one list, walked
     side by side in batches (:func:`geometry.kinematics.sweep_many`, the same sweeps
-    whatever the batch), the batches claimed by the machine's cores
-    (:func:`ldhp_tamp.parallel.fork_map`: one forked child for all the primitives).
+    whatever the batch), the batches claimed by the machine's cores from
+    ``TRANSITION_FORK_MIN`` sweeps on (:func:`ldhp_tamp.parallel.fork_map`: one forked
+    child for all the primitives), else one batch in this process.
     """
     where = f"the setup ({', '.join(p.name for p in prims)} transitions)"
     jobs: list[tuple[int, Motion, float]] = []  # (primitive, motion, s_max)

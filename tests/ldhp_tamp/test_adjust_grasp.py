@@ -637,3 +637,16 @@ def test_a_wedged_block_is_let_go_of_by_rolling_the_finger_under_it(wedged_inver
     from_start = feasible.take(np.flatnonzero(feasible.src == start))
     assert len(from_start) and (np.abs(from_start.sense) == ag.ROLL_SENSE).all()
     assert (from_start.finger == 1).all()
+
+
+def test_hypot_is_numpys_norm_to_the_bit() -> None:
+    """Slide travels and pivot turn radii take the root of the summed squares of the
+    components: numpy's norm of the stacked pairs, bit for bit (np.hypot rounds otherwise)."""
+    from ldhp_tamp.primitives.adjust_grasp import _hypot
+
+    rng = np.random.default_rng(11)
+    x = rng.standard_normal(100_000) * 10.0 ** rng.integers(-8, 9, 100_000)
+    y = rng.standard_normal(100_000) * 10.0 ** rng.integers(-8, 9, 100_000)
+    got = _hypot(x, y)
+    assert got.tobytes() == np.linalg.norm(np.stack([x, y], axis=1), axis=1).tobytes()
+    assert got.tobytes() == np.linalg.norm(np.stack([y, x], axis=1), axis=1).tobytes()
