@@ -65,7 +65,8 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, 
     jobs = min(jobs, len(items) // max(1, int(min_items_per_core)))
     if jobs <= 1 or not hasattr(os, "fork"):
         return [fn(x) for x in items]
-    tokens = _tokens(len(items))
+    per = -(-len(items) // MAX_TOKENS)  # items a token claims: one, unless there are very many
+    tokens = _tokens(-(-len(items) // per))
     children: list[tuple[int, int]] = []  # (pid, read end)
     try:
         for _ in range(1, jobs):
@@ -74,12 +75,12 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, 
             if pid == 0:  # the child: never returns
                 try:
                     os.close(read_end)
-                    _child(write_end, fn, items, tokens)
+                    _child(write_end, fn, items, tokens, per)
                 finally:
                     os._exit(0)
             os.close(write_end)
             children.append((pid, read_end))
-        done = dict(_claimed(fn, items, tokens))
+        done = dict(_claimed(fn, items, tokens, per))
         for j, (pid, read_end) in enumerate(children):
             children[j] = (pid, -1)  # _collect closes, reaps (and kills if need be)
             done.update(_collect(pid, read_end))
@@ -98,16 +99,20 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, 
     return [done[i] for i in range(len(items))]
 
 
-#: Bytes of one token of :func:`_tokens` (an item's index, little-endian).
+#: Bytes of one token of :func:`_tokens` (an index, little-endian).
 _TOKEN = 4
+#: Most tokens in one pipe, written before anyone reads: a pipe holds one page at least
+#: (4 KiB; 64 KiB by default on Linux, one page when the user's pipes are many). A list
+#: of more items is claimed in runs.
+MAX_TOKENS = 4096 // _TOKEN
 
 
 def _tokens(n: int) -> int:
     """The read end of a pipe holding the tokens 0, 1, ..., n - 1 and closed for writing:
-    reading one claims that item (reads of a pipe are whole, under its lock), an empty
-    read means none is left. ``n`` is at most 16384 (a pipe holds 64 KiB)."""
-    if n * _TOKEN > 1 << 16:
-        raise ValueError(f"fork_map: at most {(1 << 16) // _TOKEN} items, got {n}")
+    reading one claims it (reads of a pipe are whole, under its lock), an empty read
+    means none is left. ``n`` is at most :data:`MAX_TOKENS`."""
+    if not 0 <= n <= MAX_TOKENS:
+        raise ValueError(f"fork_map: at most {MAX_TOKENS} tokens, not {n}")
     read_end, write_end = os.pipe()
     try:
         os.write(write_end, b"".join(i.to_bytes(_TOKEN, "little") for i in range(n)))
@@ -116,21 +121,23 @@ def _tokens(n: int) -> int:
     return read_end
 
 
-def _claimed(fn: Callable[[T], R], items: Sequence[T], tokens: int) -> list[tuple[int, R]]:
-    """``(i, fn(items[i]))`` for each item this process claims, until none is left."""
+def _claimed(fn: Callable[[T], R], items: Sequence[T], tokens: int, per: int = 1) -> list[tuple[int, R]]:
+    """``(i, fn(items[i]))`` for each item this process claims (token k: the items
+    ``k * per`` to ``(k + 1) * per - 1``), until none is left."""
     out = []
     while token := os.read(tokens, _TOKEN):
-        i = int.from_bytes(token, "little")
-        out.append((i, fn(items[i])))
+        k = int.from_bytes(token, "little")
+        for i in range(k * per, min((k + 1) * per, len(items))):
+            out.append((i, fn(items[i])))
     return out
 
 
-def _child(write_end: int, fn: Callable[[T], R], items: Sequence[T], tokens: int) -> None:
+def _child(write_end: int, fn: Callable[[T], R], items: Sequence[T], tokens: int, per: int) -> None:
     """A child's work: the items it claims with their results, or what went wrong (it
     then claims no more), pickled to the pipe."""
     signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the parent's alarm is the parent's
     with os.fdopen(write_end, "wb") as pipe:
-        pipe.write(_pickled(_outcome(lambda: _claimed(fn, items, tokens))))
+        pipe.write(_pickled(_outcome(lambda: _claimed(fn, items, tokens, per))))
 
 
 def _outcome(call: Callable[[], object]) -> tuple[str, object]:

@@ -165,10 +165,20 @@ def test_unpicklable_errors_and_results_are_reported(tmp_path) -> None:
     assert _children() <= before
 
 
-def test_too_many_items_for_the_tokens_are_refused() -> None:
-    with pytest.raises(ValueError, match="at most 16384 items"):
-        parallel._tokens(16385)
-    read_end = parallel._tokens(16384)
+def test_more_items_than_tokens_are_claimed_in_runs(monkeypatch, tmp_path) -> None:
+    """A pipe holds MAX_TOKENS tokens: a longer list is claimed in runs of items, each
+    item still computed once, by one process."""
+    monkeypatch.setattr(parallel, "MAX_TOKENS", 4)
+    items = list(range(101))
+    me = os.getpid()
+    pids = fork_map(_child_does(me, tmp_path / "claimed", lambda x: os.getpid(), lambda x: os.getpid()), items, 2)
+    assert len(pids) == 101 and len(set(pids)) == 2
+    # runs of 26 consecutive items (ceil(101 / 4)), each run in one process
+    assert all(len(set(pids[k:k + 26])) == 1 for k in range(0, 101, 26))
+    assert fork_map(lambda x: x * x, items, 2) == [x * x for x in items]
+    with pytest.raises(ValueError, match="at most 4 tokens"):
+        parallel._tokens(5)
+    read_end = parallel._tokens(4)
     try:
         assert os.read(read_end, 8) == (0).to_bytes(4, "little") + (1).to_bytes(4, "little")
     finally:
