@@ -324,6 +324,28 @@ build_chunk(const Feasible *f, Py_ssize_t s, Py_ssize_t b, double *X, double *Y,
     }
 }
 
+/* whether every buffer of a call is C-contiguous; else a ValueError naming the call */
+static int
+contiguous(Py_buffer *const *all, size_t n, const char *name)
+{
+    for (size_t q = 0; q < n; q++) {
+        if (!PyBuffer_IsContiguous(all[q], 'C')) {
+            PyErr_Format(PyExc_ValueError, "%s: buffers must be C-contiguous", name);
+            return 0;
+        }
+    }
+    return 1;
+}
+
+static void
+release(Py_buffer *const *all, size_t n)
+{
+    for (size_t q = 0; q < n; q++)
+        PyBuffer_Release(all[q]);
+}
+
+#define COUNT(a) (sizeof(a) / sizeof((a)[0]))
+
 static PyObject *
 feasible_py(PyObject *Py_UNUSED(self), PyObject *args)
 {
@@ -340,12 +362,8 @@ feasible_py(PyObject *Py_UNUSED(self), PyObject *args)
     Py_buffer *all[] = {&pts, &nrm, &mu, &modes, &slides, &com, &inv_L, &margin, &out};
     Py_ssize_t B = out.len, D = (Py_ssize_t)sizeof(double);
     Py_ssize_t C = B ? mu.len / D / B : 0;
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++) {
-        if (!PyBuffer_IsContiguous(all[q], 'C')) {
-            PyErr_SetString(PyExc_ValueError, "feasible: buffers must be C-contiguous");
-            goto done;
-        }
-    }
+    if (!contiguous(all, COUNT(all), "feasible"))
+        goto done;
     if (mu.len != B * C * D || pts.len != 2 * mu.len || nrm.len != pts.len || slides.len != pts.len
         || modes.len != B * C || (com.len != 2 * D && com.len != 2 * B * D)
         || (inv_L.len != D && inv_L.len != B * D) || (margin.len != D && margin.len != B * D) || chunk < 1) {
@@ -360,8 +378,7 @@ feasible_py(PyObject *Py_UNUSED(self), PyObject *args)
     }
     if (B == 0 || C == 0) {
         memset(out.buf, 0, (size_t)B);
-        result = Py_None;
-        Py_INCREF(result);
+        result = Py_NewRef(Py_None);
         goto done;
     }
     Feasible f = {pts.buf, nrm.buf, mu.buf, slides.buf, com.buf, inv_L.buf, margin.buf, modes.buf,
@@ -384,12 +401,10 @@ feasible_py(PyObject *Py_UNUSED(self), PyObject *args)
             o[i] &= (unsigned char)!pen[i];
     }
     Py_END_ALLOW_THREADS
-    result = Py_None;
-    Py_INCREF(result);
+    result = Py_NewRef(Py_None);
 done:
     PyMem_RawFree(work);
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
-        PyBuffer_Release(all[q]);
+    release(all, COUNT(all));
     return result;
 }
 
@@ -469,12 +484,8 @@ convex_overlap_py(PyObject *Py_UNUSED(self), PyObject *args)
     PyObject *result = NULL;
     Py_buffer *all[] = {&P, &S, &E, &lo, &hi, &hit, &decided};
     Py_ssize_t D = (Py_ssize_t)sizeof(double), B = hit.len, K = S.len / D / 2;
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++) {
-        if (!PyBuffer_IsContiguous(all[q], 'C')) {
-            PyErr_SetString(PyExc_ValueError, "convex_overlap: buffers must be C-contiguous");
-            goto done;
-        }
-    }
+    if (!contiguous(all, COUNT(all), "convex_overlap"))
+        goto done;
     if (V < 1 || V > MAX_POLYGON || P.len != B * V * 2 * D || decided.len != B || S.len != K * 2 * D
         || E.len != S.len || lo.len != S.len || hi.len != S.len) {
         PyErr_Format(PyExc_ValueError, "convex_overlap: polygons must be (B, V, 2) doubles with 1 <= V <= %d, "
@@ -485,11 +496,9 @@ convex_overlap_py(PyObject *Py_UNUSED(self), PyObject *args)
     Py_BEGIN_ALLOW_THREADS
     convex_overlap(P.buf, B, V, S.buf, E.buf, lo.buf, hi.buf, K, err, floor_, hit.buf, decided.buf);
     Py_END_ALLOW_THREADS
-    result = Py_None;
-    Py_INCREF(result);
+    result = Py_NewRef(Py_None);
 done:
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
-        PyBuffer_Release(all[q]);
+    release(all, COUNT(all));
     return result;
 }
 
@@ -508,6 +517,23 @@ clip(double v, double lo, double hi)
     /* numpy.clip: minimum(maximum(v, lo), hi) */
     double m = v > lo ? v : lo;
     return m < hi ? m : hi;
+}
+
+static inline double
+dot(double ax, double ay, double bx, double by)
+{
+    return ax * bx + ay * by;
+}
+
+/* point p in the frame of a segment starting at o with direction t and normal n: its
+   (along, across) coordinates */
+static inline void
+in_frame(double px, double py, double ox, double oy, double tx, double ty, double nx, double ny, double *along,
+         double *across)
+{
+    double rx = px - ox, ry = py - oy;
+    *along = dot(rx, ry, tx, ty);
+    *across = dot(rx, ry, nx, ny);
 }
 
 /* a point at (along, across) from a segment's start, in the segment's frame, lies within
@@ -552,27 +578,21 @@ pair_tests(const double *V, const double *D, const double *Nn, Py_ssize_t X, Py_
                 double Nex = env[E_NX * ET + e], Ney = env[E_NY * ET + e];
                 double Le = env[E_LE * ET + e];
                 double Tax = env[E_TAX * ET + e], Tay = env[E_TAY * ET + e], Lea = env[E_LEA * ET + e];
+                double u, s, eu, es, uQ, sQ;
                 /* vertex-edge: object vertex i vs environment edge y */
-                double rx = vx - Ax, ry = vy - Ay;
-                double u = rx * Tx + ry * Ty;
-                double s = rx * Nex + ry * Ney;
-                double nd_next = dx * Nex + dy * Ney;
-                double nd_prev = -(pdx * Nex + pdy * Ney);
+                in_frame(vx, vy, Ax, Ay, Tx, Ty, Nex, Ney, &u, &s);
                 ve_out[at] = (unsigned char)(near_segment(u, s, Le, tol2)
-                                             && free_side(nd_next, lo_i, nd_prev, lo_p, tol) && obj_convex[i]);
+                                             && free_side(dot(dx, dy, Nex, Ney), lo_i, -dot(pdx, pdy, Nex, Ney), lo_p,
+                                                          tol)
+                                             && obj_convex[i]);
                 /* edge-vertex: environment vertex y (the start of edge y) vs object edge i */
-                double wx = Ax - vx, wy = Ay - vy;
-                double eu = wx * dx + wy * dy;
-                double es = wx * nx + wy * ny;
-                double nt_next = nx * Tx + ny * Ty;
-                double nt_prev = -(nx * Tax + ny * Tay);
+                in_frame(Ax, Ay, vx, vy, dx, dy, nx, ny, &eu, &es);
                 ev_out[at] = (unsigned char)(near_segment(eu, es, lo_i, tol2)
-                                             && free_side(nt_next, Le, nt_prev, Lea, tol) && env_convex[e]);
+                                             && free_side(dot(nx, ny, Tx, Ty), Le, -dot(nx, ny, Tax, Tay), Lea, tol)
+                                             && env_convex[e]);
                 /* edge-edge: object edge i (v_i -> v_(i+1)) vs environment edge y */
-                double qrx = qx - Ax, qry = qy - Ay;
-                double uQ = qrx * Tx + qry * Ty;
-                double sQ = qrx * Nex + qry * Ney;
-                int facing = nx * Nex + ny * Ney < 0.0;
+                in_frame(qx, qy, Ax, Ay, Tx, Ty, Nex, Ney, &uQ, &sQ);
+                int facing = dot(nx, ny, Nex, Ney) < 0.0;
                 double mn = u < uQ ? u : uQ, mx = u > uQ ? u : uQ;
                 double lo = mn > 0.0 ? mn : 0.0;
                 double hi = mx < Le ? mx : Le;
@@ -603,12 +623,8 @@ pair_tests_py(PyObject *Py_UNUSED(self), PyObject *args)
     PyObject *result = NULL;
     Py_buffer *all[] = {&V, &D, &Nn, &env, &env_convex, &Lo, &obj_convex, &u, &s, &lo, &hi, &ve, &ev, &ee};
     Py_ssize_t Dz = (Py_ssize_t)sizeof(double), cells = X * N * Y;
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++) {
-        if (!PyBuffer_IsContiguous(all[q], 'C')) {
-            PyErr_SetString(PyExc_ValueError, "pair_tests: buffers must be C-contiguous");
-            goto done;
-        }
-    }
+    if (!contiguous(all, COUNT(all), "pair_tests"))
+        goto done;
     if (X < 0 || N < 1 || Y < 0 || (Xe != 1 && Xe != X) || V.len != X * N * 2 * Dz || D.len != V.len
         || Nn.len != V.len || env.len != E_TABLES * Xe * Y * Dz || env_convex.len != Xe * Y || Lo.len != N * Dz
         || obj_convex.len != N || u.len != cells * Dz || s.len != u.len || lo.len != u.len || hi.len != u.len
@@ -622,11 +638,9 @@ pair_tests_py(PyObject *Py_UNUSED(self), PyObject *args)
     pair_tests(V.buf, D.buf, Nn.buf, X, N, Y, env.buf, env_convex.buf, Xe, Lo.buf, obj_convex.buf, tol, eps, u.buf,
                s.buf, lo.buf, hi.buf, ve.buf, ev.buf, ee.buf);
     Py_END_ALLOW_THREADS
-    result = Py_None;
-    Py_INCREF(result);
+    result = Py_NewRef(Py_None);
 done:
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
-        PyBuffer_Release(all[q]);
+    release(all, COUNT(all));
     return result;
 }
 
@@ -638,13 +652,11 @@ cone_contains_py(PyObject *Py_UNUSED(self), PyObject *args)
     if (!PyArg_ParseTuple(args, "y*y*y*y*w*ddd", &X, &Y, &Z, &T, &out, &cross_tol, &det_tol, &deg_tol))
         return NULL;
     PyObject *result = NULL;
+    Py_buffer *all[] = {&X, &Y, &Z, &T, &out};
     Py_ssize_t b = out.len;
     Py_ssize_t K = b ? X.len / (Py_ssize_t)sizeof(double) / b : 0;
-    if (!PyBuffer_IsContiguous(&X, 'C') || !PyBuffer_IsContiguous(&Y, 'C') || !PyBuffer_IsContiguous(&Z, 'C')
-        || !PyBuffer_IsContiguous(&T, 'C') || !PyBuffer_IsContiguous(&out, 'C')) {
-        PyErr_SetString(PyExc_ValueError, "contains: buffers must be C-contiguous");
+    if (!contiguous(all, COUNT(all), "contains"))
         goto done;
-    }
     if (X.len != K * b * (Py_ssize_t)sizeof(double) || Y.len != X.len || Z.len != X.len
         || T.len != 3 * b * (Py_ssize_t)sizeof(double)) {
         PyErr_SetString(PyExc_ValueError, "contains: X, Y, Z must be (K, b) and T (3, b) doubles, out b bytes");
@@ -658,14 +670,9 @@ cone_contains_py(PyObject *Py_UNUSED(self), PyObject *args)
     decide((const double *)X.buf, (const double *)Y.buf, (const double *)Z.buf, (const double *)T.buf,
            (unsigned char *)out.buf, K, b, cross_tol, det_tol, deg_tol);
     Py_END_ALLOW_THREADS
-    result = Py_None;
-    Py_INCREF(result);
+    result = Py_NewRef(Py_None);
 done:
-    PyBuffer_Release(&X);
-    PyBuffer_Release(&Y);
-    PyBuffer_Release(&Z);
-    PyBuffer_Release(&T);
-    PyBuffer_Release(&out);
+    release(all, COUNT(all));
     return result;
 }
 

@@ -1100,8 +1100,8 @@ def enumerate_contact_states(
                            masks.edge_edge[keep].reshape(poses.shape[0], -1)], axis=1)
     if poses.shape[0] == 0:
         return ()
-    inverse, firsts = row_groups(_byte_words(np.packbits(bits, axis=1)))  # np.unique(axis=0)'s groups
-    n_groups = firsts.size
+    inverse, heads = row_groups(_byte_words(np.packbits(bits, axis=1)))  # np.unique(axis=0)'s groups
+    n_groups = heads.size
     kept_masks = ContactMasks(masks.vertex_edge[keep], masks.edge_vertex[keep], masks.edge_edge[keep])
 
     scale = world.object.polygon.radius

@@ -123,17 +123,19 @@ def test_a_childs_exception_is_raised_in_the_parent(tmp_path) -> None:
 @needs_fork
 def test_an_exception_in_the_parent_kills_the_children(tmp_path) -> None:
     before = _children()
+    finished = tmp_path / "finished"
+
     def hang(x):
         time.sleep(60.0)
+        finished.touch()  # only if it was left to finish
         return x
 
     def boom(x):
         raise ValueError("the parent's item")
 
-    t0 = time.monotonic()
     with pytest.raises(ValueError, match="the parent's item"):
         fork_map(_child_does(os.getpid(), tmp_path / "claimed", hang, boom), range(64), 2)
-    assert time.monotonic() - t0 < 30.0  # the hanging child was not waited for
+    assert not finished.exists()  # the hanging child was killed, not waited for (no clock read)
     assert _children() <= before
 
 
