@@ -15,7 +15,7 @@ import logging
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from geometry.kinematics import SweepEnd, sweep, translate
 from geometry.poses import Pose, transform_points
 from geometry.tolerances import CONTACT_BACKOFF, CONTACT_TOL
 from geometry.world import World
+from ldhp_tamp.parallel import Forked
 from ldhp_tamp.primitives.registry import DomainInfo, PrimitiveRegistry
 
 log = logging.getLogger(__name__)
@@ -113,6 +114,10 @@ class PlanningContext:
     helper: Any = field(default=None, repr=False)
     """``None``, or a function returning a live :class:`ldhp_tamp.parallel.Helper` whose
     state starts with the world (or ``None``): the streams' sweeps may run there."""
+    jobs: int | None = None
+    """Processes the streams' independent work may be shared by (the lift-off poses,
+    :func:`ldhp_tamp.parallel.fork_map`): ``None``, the machine's cores; 1 keeps it in
+    this process (a solve without helpers)."""
 
     @property
     def start_free(self) -> bool:
@@ -233,16 +238,44 @@ def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses
 
 
 def admissible_transitions(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry,
+                           meanwhile: Callable[[], object] | None = None,
                            ) -> dict[str, frozenset[tuple[ContactState, ContactState]]]:
     """The registry's transitions for the domain's MoveObject actions, restricted to the
     graph: pairs whose ends are not nodes (a sweep can leave the workspace) and self-loops
-    are dropped."""
+    are dropped.
+
+    ``meanwhile``: other work of the solve, done in this process while a forked one
+    (:class:`ldhp_tamp.parallel.Forked`) computes the transitions; that process sends
+    them back with what it added to ``ctx.memo`` (the air-move's carrying grasps), so
+    that this process ends as if it had computed them itself. With one core, ``meanwhile``
+    runs first, then the transitions."""
+    if meanwhile is None:
+        found = registry.admissible_transitions(domain, ctx)
+    else:
+        job = Forked(_transitions_and_memo, ctx, domain, registry)
+        forked = job.forked
+        try:
+            meanwhile()
+            found, memo = job.result()
+        finally:
+            job.close()
+        if forked:  # what the child memoised, as if memoised here
+            for key, value in memo.items():
+                ctx.memo.setdefault(key, value)
     nodes = ctx.state_set
     out = {name: frozenset((a, b) for a, b in pairs if a != b and a in nodes and b in nodes)
-           for name, pairs in registry.admissible_transitions(domain, ctx).items()}
+           for name, pairs in found.items()}
     for name, pairs in out.items():
         log.debug("%s: %d admissible transitions", name, len(pairs))
     return out
+
+
+def _transitions_and_memo(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry
+                          ) -> tuple[dict[str, frozenset[tuple[ContactState, ContactState]]], dict[Any, Any]]:
+    """The registry's transitions and the entries they added to ``ctx.memo``."""
+    before = set(ctx.memo)
+    found = registry.admissible_transitions(domain, ctx)
+    return found, {key: value for key, value in ctx.memo.items() if key not in before}
 
 
 def relevant_states(ctx: PlanningContext, transitions: dict[str, frozenset[tuple[ContactState, ContactState]]]

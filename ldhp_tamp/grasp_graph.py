@@ -493,6 +493,18 @@ class GraspPlanner:
         same grasp set, e.g. :mod:`ldhp_tamp.baselines.contact_rrt`)."""
         self._prepare(np.asarray(start_pose, dtype=float))
 
+    def prepare_tables(self) -> None:
+        """Have the AdjustGrasp primitives build what their proposals share at every
+        pose of the grasp set (their optional ``prepare``: pivots', slides' and
+        closings' tables of pairs), which their first proposals would build otherwise:
+        the solve does it while a forked process computes the setup's transitions, and
+        a helper forked later inherits them. Call :meth:`prepare` first (a change of
+        grasp set makes a new context)."""
+        for prim in self.primitives:
+            build = getattr(prim.impl, "prepare", None)
+            if build is not None:
+                build(self.context)
+
     def move_step(self, segment: Segment, g: int, press: float | None = None) -> Step:
         """The MoveObject plan step of ``segment`` carrying grasp ``g`` (as in the plans
         :meth:`plan` makes); ``press`` (N), when given, is the press the step asks for

@@ -1,6 +1,6 @@
 """Independent work of one solve on the machine's cores, in forked children.
 
-Two tools. :func:`fork_map` applies a function to a list of items: the parent process
+Three tools. :func:`fork_map` applies a function to a list of items: the parent process
 and a forked child per other core claim the items one at a time as each gets free; a
 child inherits everything the parent has built (the world, the contact states, the
 grasp set) for free and sends only its results back through a pipe, pickled. It serves
@@ -9,7 +9,9 @@ milliseconds each, in batches; a pool of workers would have to be sent the world
 and would cost more than it saves. :class:`Helper` is
 one long-lived child for work that comes one piece at a time (the bottom tier's G_m and
 G_T, the streams' sweeps): the solve hands it the next piece and computes the current
-one itself.
+one itself. :class:`Forked` is one child for one call whose small result the parent
+takes later, doing other work meanwhile (the setup's transitions, while the parent
+builds the grasp graph's tables).
 
 The results are those of ``[fn(x) for x in items]``, in that order, whatever the number
 of cores: each item is computed by exactly one process, by the same code. An exception
@@ -23,16 +25,17 @@ Without ``os.fork`` (not POSIX), with one core, or with few items, it runs in th
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import pickle
 import signal
 import threading
-from typing import Callable, Iterator, Sequence, TypeVar
+from typing import Callable, Generic, Iterator, Sequence, TypeVar
 
 from ldhp_tamp.errors import TimeBudgetExceeded
 
-__all__ = ["Helper", "cores", "fork_map", "two_at_a_time"]
+__all__ = ["Forked", "Helper", "cores", "fork_map", "two_at_a_time"]
 
 log = logging.getLogger(__name__)
 
@@ -88,12 +91,7 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, 
         os.close(tokens)
         for pid, read_end in children:  # what is left: interrupted
             if read_end >= 0:
-                with contextlib.suppress(OSError):
-                    os.close(read_end)
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGKILL)
-                with contextlib.suppress(ChildProcessError):
-                    os.waitpid(pid, 0)
+                _end(pid, functools.partial(os.close, read_end))
     if len(done) != len(items):
         raise RuntimeError(f"the worker processes of the solve returned {len(done)} results, not {len(items)}")
     return [done[i] for i in range(len(items))]
@@ -175,7 +173,16 @@ def _answer(message: tuple[str, object], who: str) -> object:
 
 
 def _collect(pid: int, read_end: int) -> list[tuple[int, R]]:
-    """Read a child's pickled answer to the end, reap it, return its results or raise."""
+    """Read a :func:`fork_map` child's pickled answer to the end, reap it, return its
+    results or raise."""
+    payload = _answer_of(pid, read_end, "a worker process of the solve")
+    assert isinstance(payload, list)
+    return payload
+
+
+def _answer_of(pid: int, read_end: int, who: str) -> object:
+    """Read a child's pickled :func:`_outcome` to the end, reap the child (killed first
+    if the read was interrupted), return its value or raise its error."""
     chunks = []
     done = False
     try:
@@ -189,10 +196,70 @@ def _collect(pid: int, read_end: int) -> list[tuple[int, R]]:
                 os.kill(pid, signal.SIGKILL)
         _, status = os.waitpid(pid, 0)
     if not chunks:
-        raise RuntimeError(f"a worker process of the solve died (wait status {status})")
-    payload = _answer(pickle.loads(b"".join(chunks)), "a worker process of the solve")
-    assert isinstance(payload, list)
-    return payload
+        raise RuntimeError(f"{who} died (wait status {status})")
+    return _answer(pickle.loads(b"".join(chunks)), who)
+
+
+class Forked(Generic[R]):
+    """``fn(*args)`` computed in a child forked now, while this process does something
+    else; :meth:`result` waits for its value (its exception raised again here).
+
+    The child inherits everything the parent has built and sends back only the pickled
+    value. For work whose result is small and whose inputs are large, beside work of
+    this process whose result is large (the setup's transitions beside the grasp
+    graph's tables). Without ``os.fork``, or on one core, ``fn`` runs in :meth:`result`.
+    :meth:`close` kills and reaps a child whose value is not wanted (after an exception
+    in the parent); :meth:`result` closes it too when interrupted.
+    """
+
+    def __init__(self, fn: Callable[..., R], *args: object) -> None:
+        self._call: tuple[Callable[..., R], tuple[object, ...]] | None = None
+        self._pid, self._read_end = -1, -1
+        if cores() < 2 or not hasattr(os, "fork"):
+            self._call = (fn, args)
+            return
+        read_end, write_end = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: never returns
+            try:
+                os.close(read_end)
+                signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the parent's alarm is the parent's
+                with os.fdopen(write_end, "wb") as pipe:
+                    pipe.write(_pickled(_outcome(lambda: fn(*args))))
+            finally:
+                os._exit(0)
+        os.close(write_end)
+        self._pid, self._read_end = pid, read_end
+
+    @property
+    def forked(self) -> bool:
+        """Whether a child computes the value (else :meth:`result` will)."""
+        return self._pid > 0
+
+    def result(self) -> R:
+        """The value of ``fn(*args)``: the child's (waited for), or computed now."""
+        if self._call is not None:
+            fn, args = self._call
+            self._call = None
+            return fn(*args)
+        if self._pid <= 0:
+            raise RuntimeError("Forked: the value was taken already, or the child closed")
+        pid, read_end = self._pid, self._read_end
+        self._pid, self._read_end = -1, -1
+        return _answer_of(pid, read_end, "the solve's forked process")  # type: ignore[return-value]
+
+    def close(self) -> None:
+        """Kill and reap the child, if any (idempotent); its value is dropped."""
+        self._call = None
+        if self._pid <= 0:
+            return
+        pid, read_end = self._pid, self._read_end
+        self._pid, self._read_end = -1, -1
+        _end(pid, functools.partial(os.close, read_end))
+
+    def __del__(self) -> None:  # a child nobody waited for is still reaped
+        with contextlib.suppress(Exception):
+            self.close()
 
 
 class Helper:
@@ -260,17 +327,24 @@ class Helper:
         if not self.alive:
             return
         pid, self._pid = self._pid, -1
-        with _alarm_held():
-            with contextlib.suppress(OSError):
-                self._conn.close()
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
-            with contextlib.suppress(ChildProcessError):
-                os.waitpid(pid, 0)
+        _end(pid, self._conn.close)
 
     def __del__(self) -> None:  # a helper nobody closed still ends its child
         with contextlib.suppress(Exception):
             self.close()
+
+
+def _end(pid: int, close: Callable[[], None]) -> None:
+    """Close this process's end of a child's pipe (``close``), kill the child and reap
+    it, the budget's alarm held off meanwhile (so that an end in a ``finally`` always
+    reaps the child)."""
+    with _alarm_held():
+        with contextlib.suppress(OSError):
+            close()
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        with contextlib.suppress(ChildProcessError):
+            os.waitpid(pid, 0)
 
 
 @contextlib.contextmanager

@@ -28,6 +28,7 @@ from geometry.poses import Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL
 from ldhp_tamp import budget
 from ldhp_tamp.contact_graph import PlanningContext
+from ldhp_tamp.parallel import fork_map
 from ldhp_tamp.path import Segment
 from ldhp_tamp.primitives.move_object import MARGIN_MM, carriers
 from ldhp_tamp.primitives.registry import DomainInfo, Family, PrimitiveRegistry, Transition
@@ -436,6 +437,9 @@ class PathSearch:
 
 #: Grid step (mm of vertex motion) of the lift-off poses looked at along a motion before a lift.
 LIFT_OFF_STEP_MM = 10.0
+#: Lift-off poses per core from which they are shared with the other cores (a pose's
+#: carriers take a few milliseconds, a fork about ten).
+LIFT_OFF_FORK_MIN = 6
 
 
 def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) -> list[tuple[float, int]]:
@@ -453,13 +457,15 @@ def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) ->
     n = int(math.ceil((b - a - 2.0 * margin) * speed / LIFT_OFF_STEP_MM))
     if n < 1:
         return []
-    out = []
-    for value, pose in zip(np.linspace(a + margin, b - margin, n + 1),
-                           motion.poses(np.linspace(a + margin, b - margin, n + 1))):
+    values = np.linspace(a + margin, b - margin, n + 1)
+
+    def count(pose: np.ndarray) -> int:
         found = carriers(ctx, Pose.from_array(pose))
-        if found is not None and found.size:
-            out.append((float(value), int(found.size)))
-    return out
+        return 0 if found is None else int(found.size)
+
+    # the poses are independent: the machine's cores take them one at a time
+    counts = fork_map(count, list(motion.poses(values)), ctx.jobs, min_items_per_core=LIFT_OFF_FORK_MIN)
+    return [(float(value), c) for value, c in zip(values, counts) if c]
 
 
 @dataclass(eq=False)

@@ -94,7 +94,9 @@ class SolveOptions:
     helpers: bool = True
     """On a machine with more than one core, let a helper process (forked by the bottom
     tier with the grasp set) take half of the G_T and G_m computations and of the streams'
-    sweeps; the plans are the same either way."""
+    sweeps, a forked process compute the setup's transitions while this one builds the
+    grasp graph's tables, and the cores share the streams' lift-off poses; the plans are
+    the same either way."""
     feedback: bool = True
     """Feed a failed pose path back to the symbolic tier as constraints (the failing
     transitions are forbidden); ``False`` (the ``ldhp-nofeedback`` planner): nothing is
@@ -338,12 +340,19 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples, edge_offsets=offsets))
     budget.check(deadline, "the setup (grasp enumeration)")
     ctx = replace(ctx, grasps=grasps)  # air-move lifts and placements need a carrying grasp
-    transitions = admissible_transitions(ctx, domain.info, REGISTRY)
     adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
     grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release,
                                  GraspGraphOptions(helper=options.helpers), start_any=scenario.start_grasp_any)
-    if scenario.start_grasp is not None:  # the grasp the object starts in, for the Step-1 air-move
+
+    def tables() -> None:  # the grasp set of the paths from the start (with the start grasp's row)
         grasp_planner.prepare((ctx.start if ctx.start_free else ctx.start_contact.pose).as_array())
+        grasp_planner.prepare_tables()
+
+    # The transitions in a forked process (when helpers are on), the grasp graph's tables here meanwhile.
+    transitions = admissible_transitions(ctx, domain.info, REGISTRY, meanwhile=tables if options.helpers else None)
+    if not options.helpers:
+        tables()
+    if scenario.start_grasp is not None:  # the grasp the object starts in, for the Step-1 air-move
         ctx = replace(ctx, grasps=grasp_planner.grasps, start_grasp=int(grasp_planner.start_index))
     clock.setup = budget.clock() - clock.start
     budget.check(deadline, "the setup (contact-state graph, admissible transitions)")
@@ -351,7 +360,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
         f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 
     # the streams' sweeps, two at a time, with the bottom tier's helper once it has one
-    ctx = replace(ctx, helper=grasp_planner.live_helper)
+    ctx = replace(ctx, helper=grasp_planner.live_helper, jobs=None if options.helpers else 1)
     judge = _Judge(scenario, engine, options.simulate, c, clock, helper=grasp_planner.live_helper)
     # The transitions a prior rates unlikely to pass the bottom tier: left out of the plans
     # until no plan is left without them.

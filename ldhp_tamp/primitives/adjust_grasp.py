@@ -1160,6 +1160,13 @@ class _AdjustGrasp:
         """The gripper motions of ``edges`` (object frame)."""
         raise NotImplementedError
 
+    def prepare(self, context: AdjustContext) -> None:
+        """Build ahead what this primitive's proposals share at every pose of a grasp
+        set (its tables of pairs), which the first :meth:`propose` would otherwise
+        build: the grasp graph has it done while another process computes the setup's
+        transitions (:meth:`ldhp_tamp.grasp_graph.GraspPlanner.prepare_tables`).
+        Optional for an implementation; this default builds nothing."""
+
     def propose(self, context: AdjustContext, pose: Pose, sources: ArrayLike, members: BoolArray) -> IntraEdges:
         """Every candidate edge from a grasp of ``sources`` to a grasp allowed by
         ``members`` (a (G,) mask, normally G_T), with its exact travel and switches; no
@@ -1306,6 +1313,10 @@ class Open(_AdjustGrasp):
 
     name = "open"
 
+    def prepare(self, context: AdjustContext) -> None:
+        if not context.world.gripper.fixed_width:
+            context.close_groups  # noqa: B018 (a cached property: built now)
+
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
         gs = ctx.grasps
@@ -1373,6 +1384,10 @@ class Close(_AdjustGrasp):
     """
 
     name = "close"
+
+    def prepare(self, context: AdjustContext) -> None:
+        if not context.world.gripper.fixed_width:
+            context.close_groups  # noqa: B018 (a cached property: built now)
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
@@ -1450,6 +1465,11 @@ class Pivot(_AdjustGrasp):
     """
 
     name = "pivot"
+
+    def prepare(self, context: AdjustContext) -> None:
+        for k in range(2):
+            self._pairs(context, k)
+            self._rolls(context, k)
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
@@ -1717,6 +1737,10 @@ class Slide(_AdjustGrasp):
     """
 
     name = "slide"
+
+    def prepare(self, context: AdjustContext) -> None:
+        for k in range(2):
+            self._pairs(context, k)
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:

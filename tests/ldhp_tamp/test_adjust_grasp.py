@@ -650,3 +650,28 @@ def test_hypot_is_numpys_norm_to_the_bit() -> None:
     got = _hypot(x, y)
     assert got.tobytes() == np.linalg.norm(np.stack([x, y], axis=1), axis=1).tobytes()
     assert got.tobytes() == np.linalg.norm(np.stack([y, x], axis=1), axis=1).tobytes()
+
+
+@pytest.mark.parametrize("case", ["poly", "ranged"])
+def test_prepare_builds_ahead_the_tables_the_first_proposals_would(case: str, request) -> None:
+    """``prepare`` builds the grasp-set tables (pivots' pairs and rolls, slides' pairs,
+    closings' groups) into the context's caches; proposals afterwards are those of a
+    context that built them on the way."""
+    c: Case = request.getfixturevalue(case)
+    prims = [ag.ApproachContact(), ag.Open(), ag.Close(), ag.Pivot(), ag.Slide(), ag.Flip()]
+    ready = ag.AdjustContext(c.world, c.grasps)
+    for prim in prims:
+        prim.prepare(ready)
+    keys = {key for key in ready._cache if isinstance(key, tuple) and isinstance(key[0], str)}
+    assert {("pivot-pairs", 0), ("pivot-pairs", 1), ("pivot-rolls", 0), ("pivot-rolls", 1),
+            ("slide-pairs", 0), ("slide-pairs", 1)} <= keys
+    assert ("close_groups" in vars(ready)) == (not c.world.gripper.fixed_width)
+    assert not any(key[0] in ("layer", "holds") for key in keys)  # nothing per pose
+    fresh = ag.AdjustContext(c.world, c.grasps)
+    members = np.zeros(len(c.grasps), dtype=bool)
+    members[c.gt] = True
+    src = np.flatnonzero(ready.holds(T0, members))
+    for prim in prims:
+        a, b = prim.propose(ready, T0, src, members), prim.propose(fresh, T0, src, members)
+        for name in ("src", "dst", "sense", "finger", "travel", "switches"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -100,6 +101,30 @@ def test_task1_transitions(task1, task1_grasps, domain) -> None:
             assert a != b and a in ctx.state_set and b in ctx.state_set
 
 
+@pytest.mark.parametrize("n_cores", [1, 2])
+def test_transitions_beside_other_work_are_the_same(task1_grasps, domain, monkeypatch, n_cores: int) -> None:
+    """``meanwhile``: the transitions computed in a forked process (two cores) or after
+    the other work (one core), the same pairs with the same memo (the air-move's
+    carrying grasps) as when computed here."""
+    from dataclasses import replace
+
+    from ldhp_tamp import parallel
+
+    _, base = task1_grasps
+    here = replace(base, memo={})
+    expected = admissible_transitions(here, domain.info, REGISTRY)
+    monkeypatch.setattr(parallel, "cores", lambda: n_cores)
+    ctx = replace(base, memo={})
+    order = []
+    got = admissible_transitions(ctx, domain.info, REGISTRY,
+                                 meanwhile=lambda: order.append(("meanwhile", os.getpid(), len(ctx.memo))))
+    assert got == expected
+    assert order == [("meanwhile", os.getpid(), 0)]  # here, before the transitions' memo came in
+    assert set(ctx.memo) == set(here.memo) and ctx.memo
+    for key, value in here.memo.items():
+        np.testing.assert_array_equal(np.asarray(ctx.memo[key], dtype=object), np.asarray(value, dtype=object))
+
+
 def test_vertex_on_convex_vertex_states_are_dropped(task2) -> None:
     sc, ctx = task2
     env = sc.world.environment
@@ -172,6 +197,27 @@ def test_task1_streams_give_a_joined_path_to_the_goal(task1, domain) -> None:
             verts = np.array([sc.world.object.polygon.transformed(*p) for p in seg.poses])
             assert np.max(np.linalg.norm(np.diff(verts, axis=0), axis=2)) <= 4.0 + 1e-9
             assert seg.step in (0, 1)
+
+
+def test_lift_off_values_are_the_same_on_the_cores(task1_grasps, domain, monkeypatch) -> None:
+    """The lift-off poses' carriers, computed by the machine's cores or by this process
+    alone: the same values and counts, in the same order."""
+    from dataclasses import replace
+
+    from ldhp_tamp import parallel, streams
+
+    _, base = task1_grasps
+    plan = [Transition("tip", S("l1-e1"), S("v2-e1")), Transition("air-move", S("v2-e1"), FREE)]
+    path = next(iter(pose_paths(replace(base, memo={}), plan, domain.info, REGISTRY, np.random.default_rng(0),
+                                StreamStats())))
+    tip = path.segments[0]
+    assert tip.primitive == "tip" and tip.to_state == S("v2-e1")
+    monkeypatch.setattr(parallel, "cores", lambda: 2)
+    monkeypatch.setattr(streams, "LIFT_OFF_FORK_MIN", 1)
+    shared = streams._lift_off_values(replace(base, memo={}), tip, S("v2-e1"))
+    monkeypatch.setattr(streams, "LIFT_OFF_FORK_MIN", 10 ** 6)
+    alone = streams._lift_off_values(replace(base, memo={}), tip, S("v2-e1"))
+    assert shared == alone and len(alone) >= 3
 
 
 def test_task1_tip_stream_offers_an_overshoot_aligned_back(task1, domain) -> None:

@@ -126,6 +126,22 @@ def test_a_second_solve_reuses_the_cached_sets_and_checks(pick: Scenario, pick_g
     assert again.node_path == first.node_path
 
 
+def test_the_tables_prepared_at_the_start_pose_serve_the_plans_from_there(pick: Scenario, pick_grasps):
+    """``prepare`` at the path's start then ``prepare_tables``: the context the plan uses
+    is that one, its tables built, and the plan is the one a planner without them makes."""
+    world = pick.world
+    path = PosePath((lift(world, pick.start, 100.0),))
+    planner = GraspPlanner(world, pick_grasps, bindings(), pick.start_grasp, pick.goal_release)
+    planner.prepare(pick.start.as_array())
+    planner.prepare_tables()
+    ctx = planner.context
+    assert {("pivot-pairs", 0), ("slide-pairs", 1)} <= set(ctx._cache)
+    res = planner.plan(path)
+    plain = GraspPlanner(world, pick_grasps, bindings(), pick.start_grasp, pick.goal_release).plan(path)
+    assert planner.context is ctx and res.solved
+    assert res.node_path == plain.node_path and res.cost == plain.cost
+
+
 def test_without_approach_contact_a_task_starting_with_the_gripper_away_has_no_path(pick: Scenario, pick_grasps):
     world = pick.world
     path = PosePath((lift(world, pick.start, 100.0),))

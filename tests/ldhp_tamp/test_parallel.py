@@ -33,10 +33,10 @@ def _children() -> set[int]:
 
 
 def _wait_for(marker, seconds: float = 60.0) -> None:
-    """Until ``marker`` exists (a child has claimed an item), at most ``seconds``."""
+    """Until ``marker`` exists (the other process has claimed an item), at most ``seconds``."""
     t_end = time.monotonic() + seconds
     while not marker.exists():
-        assert time.monotonic() < t_end, "no child process claimed an item"
+        assert time.monotonic() < t_end, f"{marker.name}: the other process never claimed an item"
         time.sleep(0.001)
 
 
@@ -50,6 +50,21 @@ def _child_does(parent: int, marker, in_child, in_parent=lambda x: x):
             return in_parent(x)
         marker.touch()
         return in_child(x)
+    return fn
+
+
+def _both_compute(parent: int, where):
+    """A function for fork_map (its value: the pid computing it) whose calls wait, in
+    the parent until a child has called it, in a child until the parent has, so that
+    both surely compute an item however busy the machine (each holds one claim while it
+    waits, which leaves the others to the other)."""
+    mine, theirs = where / "parent", where / "child"
+
+    def fn(x):
+        here = os.getpid() == parent
+        (mine if here else theirs).touch()
+        _wait_for(theirs if here else mine)
+        return os.getpid()
     return fn
 
 
@@ -78,8 +93,7 @@ def test_results_are_the_serial_ones_in_order(jobs: int, tmp_path) -> None:
 @needs_fork
 def test_the_children_share_the_work(tmp_path) -> None:
     me = os.getpid()
-    pids = fork_map(_child_does(me, tmp_path / "claimed", lambda x: os.getpid(), lambda x: os.getpid()),
-                    range(64), 2)
+    pids = fork_map(_both_compute(me, tmp_path), range(64), 2)
     assert me in pids and len(set(pids)) == 2
 
 
@@ -94,8 +108,7 @@ def test_fewer_items_per_core_may_be_asked_for(tmp_path) -> None:
     """A few large items (the setup's batches of sweeps) are shared out too."""
     me = os.getpid()
     items = list(range(6))
-    fn = _child_does(me, tmp_path / "claimed", lambda x: os.getpid(), lambda x: os.getpid())
-    assert len(set(fork_map(fn, items, 2, min_items_per_core=3))) == 2
+    assert len(set(fork_map(_both_compute(me, tmp_path), items, 2, min_items_per_core=3))) == 2
     assert fork_map(lambda x: x * x, items, 2, min_items_per_core=3) == [x * x for x in items]
     assert set(fork_map(lambda x: os.getpid(), items, 2, min_items_per_core=4)) == {os.getpid()}
 
@@ -173,7 +186,7 @@ def test_more_items_than_tokens_are_claimed_in_runs(monkeypatch, tmp_path) -> No
     monkeypatch.setattr(parallel, "MAX_TOKENS", 4)
     items = list(range(101))
     me = os.getpid()
-    pids = fork_map(_child_does(me, tmp_path / "claimed", lambda x: os.getpid(), lambda x: os.getpid()), items, 2)
+    pids = fork_map(_both_compute(me, tmp_path), items, 2)
     assert len(pids) == 101 and len(set(pids)) == 2
     # runs of 26 consecutive items (ceil(101 / 4)), each run in one process
     assert all(len(set(pids[k:k + 26])) == 1 for k in range(0, 101, 26))
@@ -231,3 +244,76 @@ def test_a_helper_runs_calls_with_the_state_it_was_forked_with() -> None:
     assert not h.alive and _children() <= before
     with pytest.raises(RuntimeError):
         h.submit(_add, 1)
+
+
+# ---- Forked ---------------------------------------------------------------------------
+
+
+@needs_fork
+def test_forked_computes_in_a_child_what_the_parent_takes_later(monkeypatch) -> None:
+    from ldhp_tamp.parallel import Forked
+
+    monkeypatch.setattr(parallel, "cores", lambda: 2)
+    before = _children()
+    state = {"base": 40}
+    job = Forked(lambda x: (state["base"] + x, os.getpid()), 2)  # a closure: inherited, not pickled
+    assert job.forked
+    state["base"] = 0  # the child has its own copy, as it was at the fork
+    value, pid = job.result()
+    assert value == 42 and pid != os.getpid()
+    with pytest.raises(RuntimeError, match="taken already"):
+        job.result()
+    job.close()  # idempotent, nothing left
+    assert _children() <= before
+
+
+@needs_fork
+def test_forked_raises_the_childs_errors_and_timeouts(monkeypatch) -> None:
+    from ldhp_tamp.parallel import Forked
+
+    monkeypatch.setattr(parallel, "cores", lambda: 2)
+    before = _children()
+
+    def boom() -> None:
+        raise ValueError("in the child")
+
+    with pytest.raises(ValueError, match="in the child"):
+        Forked(boom).result()
+    with pytest.raises(TimeBudgetExceeded) as info:
+        Forked(_late, None, "the setup (transitions)").result()
+    assert info.value.where == "the setup (transitions)"
+    with pytest.raises(RuntimeError, match="cannot be pickled"):
+        Forked(lambda: (lambda: 1)).result()
+    assert _children() <= before
+
+
+@needs_fork
+def test_a_closed_forked_child_is_killed_not_waited_for(monkeypatch, tmp_path) -> None:
+    from ldhp_tamp.parallel import Forked
+
+    monkeypatch.setattr(parallel, "cores", lambda: 2)
+    before = _children()
+    started, finished = tmp_path / "started", tmp_path / "finished"
+
+    def hang() -> int:
+        started.touch()
+        time.sleep(60.0)
+        finished.touch()  # only if it was left to finish
+        return 1
+
+    job = Forked(hang)
+    _wait_for(started)
+    job.close()
+    assert not finished.exists() and _children() <= before
+    with pytest.raises(RuntimeError, match="taken already"):
+        job.result()
+
+
+def test_forked_on_one_core_computes_when_asked(monkeypatch) -> None:
+    from ldhp_tamp.parallel import Forked
+
+    monkeypatch.setattr(parallel, "cores", lambda: 1)
+    calls = []
+    job = Forked(lambda x: calls.append(x) or os.getpid(), 7)
+    assert not job.forked and calls == []  # nothing yet: the parent's other work comes first
+    assert job.result() == os.getpid() and calls == [7]
