@@ -102,7 +102,8 @@ def test_task1_transitions(task1, task1_grasps, domain) -> None:
 
 
 @pytest.mark.parametrize("n_cores", [1, 2])
-def test_transitions_beside_other_work_are_the_same(task1_grasps, domain, monkeypatch, n_cores: int) -> None:
+def test_transitions_beside_other_work_are_the_same(task1_grasps, domain, monkeypatch, tmp_path,
+                                                     n_cores: int) -> None:
     """``meanwhile``: the transitions computed in a forked process (two cores) or after
     the other work (one core), the same pairs with the same memo (the air-move's
     carrying grasps) as when computed here."""
@@ -114,12 +115,21 @@ def test_transitions_beside_other_work_are_the_same(task1_grasps, domain, monkey
     here = replace(base, memo={})
     expected = admissible_transitions(here, domain.info, REGISTRY)
     monkeypatch.setattr(parallel, "cores", lambda: n_cores)
+    where = tmp_path / "pid"
+    real = REGISTRY.admissible_transitions
+
+    def recorded(*args, **kwargs):
+        where.write_text(str(os.getpid()))  # a file: the forked process's memory is its own
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(REGISTRY, "admissible_transitions", recorded)
     ctx = replace(base, memo={})
     order = []
     got = admissible_transitions(ctx, domain.info, REGISTRY,
                                  meanwhile=lambda: order.append(("meanwhile", os.getpid(), len(ctx.memo))))
     assert got == expected
     assert order == [("meanwhile", os.getpid(), 0)]  # here, before the transitions' memo came in
+    assert (int(where.read_text()) != os.getpid()) == (n_cores > 1)  # forked on two cores only
     assert set(ctx.memo) == set(here.memo) and ctx.memo
     for key, value in here.memo.items():
         np.testing.assert_array_equal(np.asarray(ctx.memo[key], dtype=object), np.asarray(value, dtype=object))
