@@ -253,15 +253,13 @@ def admissible_transitions(ctx: PlanningContext, domain: DomainInfo, registry: P
         found = registry.admissible_transitions(domain, ctx)
     else:
         job = Forked(_transitions_and_memo, ctx, domain, registry)
-        forked = job.forked
         try:
             meanwhile()
             found, memo = job.result()
         finally:
             job.close()
-        if forked:  # what the child memoised, as if memoised here
-            for key, value in memo.items():
-                ctx.memo.setdefault(key, value)
+        for key, value in memo.items():  # what a forked process memoised, as if memoised here
+            ctx.memo.setdefault(key, value)
     nodes = ctx.state_set
     out = {name: frozenset((a, b) for a, b in pairs if a != b and a in nodes and b in nodes)
            for name, pairs in found.items()}

@@ -78,7 +78,7 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, 
             if pid == 0:  # the child: never returns
                 try:
                     os.close(read_end)
-                    _child(write_end, fn, items, tokens, per)
+                    _child(write_end, lambda: _claimed(fn, items, tokens, per))
                 finally:
                     os._exit(0)
             os.close(write_end)
@@ -130,12 +130,12 @@ def _claimed(fn: Callable[[T], R], items: Sequence[T], tokens: int, per: int = 1
     return out
 
 
-def _child(write_end: int, fn: Callable[[T], R], items: Sequence[T], tokens: int, per: int) -> None:
-    """A child's work: the items it claims with their results, or what went wrong (it
-    then claims no more), pickled to the pipe."""
+def _child(write_end: int, call: Callable[[], object]) -> None:
+    """A forked child's work: ``call()``'s value (for a :func:`fork_map` child, the items
+    it claims with their results), or what went wrong, pickled to the pipe."""
     signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the parent's alarm is the parent's
     with os.fdopen(write_end, "wb") as pipe:
-        pipe.write(_pickled(_outcome(lambda: _claimed(fn, items, tokens, per))))
+        pipe.write(_pickled(_outcome(call)))
 
 
 def _outcome(call: Callable[[], object]) -> tuple[str, object]:
@@ -223,9 +223,7 @@ class Forked(Generic[R]):
         if pid == 0:  # the child: never returns
             try:
                 os.close(read_end)
-                signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the parent's alarm is the parent's
-                with os.fdopen(write_end, "wb") as pipe:
-                    pipe.write(_pickled(_outcome(lambda: fn(*args))))
+                _child(write_end, lambda: fn(*args))
             finally:
                 os._exit(0)
         os.close(write_end)

@@ -1385,9 +1385,7 @@ class Close(_AdjustGrasp):
 
     name = "close"
 
-    def prepare(self, context: AdjustContext) -> None:
-        if not context.world.gripper.fixed_width:
-            context.close_groups  # noqa: B018 (a cached property: built now)
+    prepare = Open.prepare  # the same groups
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
