@@ -121,7 +121,10 @@ def alarm(deadline: float | None, grace: float = ALARM_GRACE_S) -> Iterator[None
     not inherit the timer.) A long call into compiled code is interrupted when it returns.
     The timer fires again every ``grace`` seconds until the body exits: Python swallows an
     exception raised while a garbage-collector callback or a finaliser runs, and a
-    one-shot alarm landing there would be lost.
+    one-shot alarm landing there would be lost. An alarm landing in library code that
+    turns any exception into its own (numpy's ``norm`` reads ``axis`` under ``except
+    Exception`` and raises a ``TypeError``) leaves the body as that exception, with the
+    :class:`TimeBudgetExceeded` as its cause or context: it is raised again as that.
     """
     usable = (deadline is not None and clock is time.perf_counter and hasattr(signal, "setitimer")
               and threading.current_thread() is threading.main_thread()
@@ -139,6 +142,13 @@ def alarm(deadline: float | None, grace: float = ALARM_GRACE_S) -> Iterator[None
     try:
         signal.setitimer(signal.ITIMER_REAL, max(deadline + grace - time.perf_counter(), 1e-3), max(grace, 1e-2))
         yield
+    except TimeBudgetExceeded:
+        raise
+    except Exception as exc:
+        cause = _budget_cause(exc)
+        if cause is None:
+            raise
+        raise cause from exc
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
@@ -146,6 +156,21 @@ def alarm(deadline: float | None, grace: float = ALARM_GRACE_S) -> Iterator[None
 
 
 _ALARMS = 0  # alarm() bodies running with the signal armed
+
+
+def _budget_cause(exc: BaseException) -> TimeBudgetExceeded | None:
+    """The :class:`TimeBudgetExceeded` among the causes and contexts of ``exc``, if any."""
+    seen: set[int] = set()
+    todo: list[BaseException | None] = [exc.__cause__, exc.__context__]
+    while todo:
+        e = todo.pop()
+        if e is None or id(e) in seen:
+            continue
+        if isinstance(e, TimeBudgetExceeded):
+            return e
+        seen.add(id(e))
+        todo += [e.__cause__, e.__context__]
+    return None
 
 
 def alarm_armed() -> bool:

@@ -287,6 +287,29 @@ def test_the_alarm_interrupts_code_without_deadline_checks() -> None:
     assert not alarm_armed()
 
 
+def test_an_alarm_a_library_turned_into_its_own_error_is_still_the_timeout() -> None:
+    """numpy's ``norm`` reads ``axis`` under ``except Exception`` and raises a TypeError
+    from whatever it caught: an alarm landing there leaves as that TypeError, with the
+    timeout as its cause; the alarm raises the timeout again. Other errors go through."""
+    late = TimeBudgetExceeded("geometry.shapes.segment_distances (interrupted)")
+
+    def converted() -> None:
+        try:
+            raise late
+        except Exception as exc:
+            raise TypeError("'axis' must be None, an integer or a tuple of integers") from exc
+
+    with pytest.raises(TimeBudgetExceeded) as info:
+        with alarm(budget.clock() + 3600.0):  # armed, and never firing here
+            assert alarm_armed()
+            converted()
+    assert info.value is late and isinstance(info.value.__cause__, TypeError)
+    with pytest.raises(ValueError, match="its own"):
+        with alarm(budget.clock() + 3600.0):
+            raise ValueError("its own")
+    assert not alarm_armed() and signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
 def test_the_alarm_interrupts_an_engine_running_in_this_process(ldhp, blocked_engine) -> None:
     problem = symbolic.build_problem(ldhp, lifting_graph())
     with pytest.raises(TimeBudgetExceeded):
