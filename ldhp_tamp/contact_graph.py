@@ -27,7 +27,7 @@ from geometry.poses import Pose, transform_points
 from geometry.tolerances import CONTACT_BACKOFF, CONTACT_TOL
 from geometry.world import World
 from ldhp_tamp.parallel import Forked
-from ldhp_tamp.primitives.registry import DomainInfo, PrimitiveRegistry
+from ldhp_tamp.primitives.registry import DeclaresActions, PrimitiveRegistry
 
 log = logging.getLogger(__name__)
 
@@ -237,7 +237,7 @@ def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses
                            transition_witnesses, stream_samples, deadline, grasps)
 
 
-def admissible_transitions(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry,
+def admissible_transitions(ctx: PlanningContext, domain: DeclaresActions, registry: PrimitiveRegistry,
                            meanwhile: Callable[[], object] | None = None,
                            ) -> dict[str, frozenset[tuple[ContactState, ContactState]]]:
     """The registry's transitions for the domain's MoveObject actions, restricted to the
@@ -268,7 +268,7 @@ def admissible_transitions(ctx: PlanningContext, domain: DomainInfo, registry: P
     return out
 
 
-def _transitions_and_memo(ctx: PlanningContext, domain: DomainInfo, registry: PrimitiveRegistry
+def _transitions_and_memo(ctx: PlanningContext, domain: DeclaresActions, registry: PrimitiveRegistry
                           ) -> tuple[dict[str, frozenset[tuple[ContactState, ContactState]]], dict[Any, Any]]:
     """The registry's transitions and the entries they added to ``ctx.memo``."""
     before = set(ctx.memo)

@@ -37,16 +37,17 @@ from geometry.world import World
 from ldhp_tamp import budget, symbolic
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
-from ldhp_tamp.errors import TimeBudgetExceeded
+from ldhp_tamp.domain_info import DomainActions, read_domain_actions
+from ldhp_tamp.errors import DomainError, TimeBudgetExceeded
 from ldhp_tamp.executability import forward_check
 from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanResult, GraspPlanStatus
 from ldhp_tamp.parallel import Helper
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Failure, FailureCause, FailureTier, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family
-from ldhp_tamp.primitives.registry import Sequel, Transition
+from ldhp_tamp.primitives.registry import DeclaresActions, Sequel, Transition
 from ldhp_tamp.prior import STATS_KEY as PRIOR_STATS_KEY, Outcomes, TransitionPrior
-from ldhp_tamp.scenario import Scenario
+from ldhp_tamp.scenario import Scenario, find_domain
 from ldhp_tamp.streams import PathSearch, PosePath, StreamStats
 from ldhp_tamp.validate import (PlanArrays, SupportAnalysis, press_table, support_analysis, support_analysis_of,
                                 validate_plan)
@@ -261,6 +262,28 @@ def _give_up(scenario: Scenario, engine: str, after: str, c: _Counters, clock: _
     return _failed(scenario, engine, best, c, clock, headline=f"{best.headline}{after}")
 
 
+def _declared_actions(source: str | Path) -> DomainActions | None:
+    """The domain's actions as the validator reads them (:func:`read_domain_actions`: no
+    unified-planning, a fraction of a millisecond), when every one of them is registered
+    with its family; ``None`` when the file is not found or not read that way, or the
+    registry disagrees: the solve then loads the domain first, which reports why."""
+    path = find_domain(str(source))
+    if path is None:
+        return None
+    try:
+        actions = read_domain_actions(path)
+    except DomainError:
+        return None
+    if any(name not in REGISTRY or REGISTRY.family(name) is not family for name, family in actions.actions):
+        return None
+    return actions
+
+
+def _bindings(info: DeclaresActions) -> tuple[tuple[str, ...], ...]:
+    """A domain's action names of each family, in its order, as the registry matches them."""
+    return tuple(tuple(name.lower() for name in info.names(family)) for family in Family)
+
+
 def _annotate(plan: Plan, scenario: Scenario, analysis: SupportAnalysis | None = None) -> Plan:
     """``plan`` with each waypoint's ``finger_forces`` and, in its stats, the support
     margin, where it is least and the largest finger force (``analysis``, the plan's
@@ -319,8 +342,21 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     grasp_rng, rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     say = progress or (lambda _msg: None)
 
-    domain = symbolic.load_checked_domain(options.domain if options.domain is not None
-                                          else settings.domain_path or settings.domain, engine, REGISTRY)
+    source = options.domain if options.domain is not None else settings.domain_path or settings.domain
+    # The domain's actions as the validator reads them, when that reading suffices for the
+    # geometry: then unified-planning's parse and the engines' checks (and, in a command's
+    # first solve, the engines' import) run beside the admissible transitions, below.
+    declared = _declared_actions(source) if options.helpers else None
+    loaded: list[symbolic.SymbolicDomain] = []
+
+    def load_domain() -> symbolic.SymbolicDomain:
+        if not loaded:
+            loaded.append(symbolic.load_checked_domain(source, engine, REGISTRY))
+        return loaded[0]
+
+    if declared is None:
+        load_domain()
+    actions = declared if declared is not None else loaded[0].info
     # The planner plans with every coefficient scaled by (1 - friction_margin); its plans
     # are validated (and simulated) with the scenario's own coefficients.
     world = scenario.world
@@ -331,6 +367,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
         ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples,
                             deadline=deadline)
     except ContactPoseError as exc:
+        load_domain()  # a domain that does not load is what is reported (exit status 2)
         text = f"top tier, step 1: {exc}"
         return _failed(scenario, engine, _Attempt(text, FailureTier.SETUP, FailureCause.NO_CONTACT_POSE,
                                                   what=_short(text)), c, clock)
@@ -340,17 +377,34 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples, edge_offsets=offsets))
     budget.check(deadline, "the setup (grasp enumeration)")
     ctx = replace(ctx, grasps=grasps)  # air-move lifts and placements need a carrying grasp
-    adjust = REGISTRY.bound(domain.info, Family.ADJUST_GRASP)
-    grasp_planner = GraspPlanner(world, grasps, adjust, scenario.start_grasp, scenario.goal_release,
-                                 GraspGraphOptions(helper=options.helpers), start_any=scenario.start_grasp_any)
+
+    def grasp_planner_of(info: DeclaresActions) -> GraspPlanner:
+        return GraspPlanner(world, grasps, REGISTRY.bound(info, Family.ADJUST_GRASP), scenario.start_grasp,
+                            scenario.goal_release, GraspGraphOptions(helper=options.helpers),
+                            start_any=scenario.start_grasp_any)
+
+    grasp_planner = grasp_planner_of(actions)
 
     def tables() -> None:  # the grasp set of the paths from the start (with the start grasp's row)
         grasp_planner.prepare((ctx.start if ctx.start_free else ctx.start_contact.pose).as_array())
         grasp_planner.prepare_tables()
 
-    # The transitions in a forked process (when helpers are on), the grasp graph's tables here meanwhile.
-    transitions = admissible_transitions(ctx, domain.info, REGISTRY, meanwhile=tables if options.helpers else None)
+    def meanwhile() -> None:
+        tables()
+        load_domain()
+
+    # The transitions in a forked process (when helpers are on), the grasp graph's tables
+    # (and the domain, if not loaded yet) here meanwhile.
+    transitions = admissible_transitions(ctx, actions, REGISTRY, meanwhile=meanwhile if options.helpers else None)
     if not options.helpers:
+        tables()
+    domain = load_domain()
+    if _bindings(domain.info) != _bindings(actions):  # not expected: the two readings of the domain differ
+        log.warning("%s: unified-planning reads the actions %s, the validator's reader %s; the setup again "
+                    "with unified-planning's", domain.info.source, _bindings(domain.info), _bindings(actions))
+        actions = domain.info
+        grasp_planner = grasp_planner_of(actions)
+        transitions = admissible_transitions(ctx, actions, REGISTRY)
         tables()
     if scenario.start_grasp is not None:  # the grasp the object starts in, for the Step-1 air-move
         ctx = replace(ctx, grasps=grasp_planner.grasps, start_grasp=int(grasp_planner.start_index))

@@ -259,6 +259,16 @@ class DomainInfo:
         return any(a.name == name for a in self.actions)
 
 
+class DeclaresActions(Protocol):
+    """What binding a domain's actions to implementations needs of the domain: their
+    names by family, in the domain's order. A :class:`DomainInfo` (unified-planning's
+    reading) has them, and so has the lighter reading of the domain file that the
+    validator uses (:class:`ldhp_tamp.domain_info.DomainActions`), with which the setup's
+    geometry starts while unified-planning parses the domain (``tamp``)."""
+
+    def names(self, family: Family | None = None) -> tuple[str, ...]: ...
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -353,7 +363,7 @@ class PrimitiveRegistry:
     def implementation(self, name: str) -> Any:
         return self.binding(name).implementation
 
-    def bound(self, domain: DomainInfo, family: Family) -> tuple[Binding, ...]:
+    def bound(self, domain: DeclaresActions, family: Family) -> tuple[Binding, ...]:
         """The bindings of the domain's actions of one family, in the domain's order.
 
         The bottom tier builds its grasp graph from ``bound(domain,
@@ -363,7 +373,7 @@ class PrimitiveRegistry:
         return tuple(self.binding(name) for name in domain.names(family))
 
     def admissible_transitions(
-        self, domain: DomainInfo, context: Any,
+        self, domain: DeclaresActions, context: Any,
     ) -> dict[str, frozenset[tuple[ContactState, ContactState]]]:
         """Ask every MoveObject implementation of the domain for its admissible transitions.
 

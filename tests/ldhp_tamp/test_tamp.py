@@ -465,3 +465,68 @@ def test_the_judge_has_the_helper_compute_the_annotation(monkeypatch) -> None:
         assert not helper.alive
     finally:
         helper.close()
+
+
+# --------------------------------------------------------------------------- the domain beside the transitions
+
+
+def _load_order(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Record when the solve loads its domain (unified-planning's parse) and when it
+    computes the admissible transitions."""
+    from ldhp_tamp import tamp
+
+    events: list[str] = []
+    load, transitions = tamp.symbolic.load_checked_domain, tamp.admissible_transitions
+
+    def loading(*args, **kwargs):
+        events.append("domain")
+        return load(*args, **kwargs)
+
+    def computing(*args, **kwargs):
+        events.append("transitions")
+        out = transitions(*args, **kwargs)
+        events.append("transitions done")
+        return out
+
+    monkeypatch.setattr(tamp.symbolic, "load_checked_domain", loading)
+    monkeypatch.setattr(tamp, "admissible_transitions", computing)
+    return events
+
+
+def test_the_domain_is_loaded_while_the_transitions_are_computed(pick_result, monkeypatch) -> None:
+    events = _load_order(monkeypatch)
+    res = solve(load_scenario(PICK))
+    assert events == ["transitions", "domain", "transitions done"]  # in the transitions' meanwhile
+    assert [w for s in res.plan.steps for w in s.waypoints] == [w for s in pick_result.plan.steps for w in s.waypoints]
+    events.clear()
+    one = solve(load_scenario(PICK), SolveOptions(helpers=False))
+    assert events == ["domain", "transitions", "transitions done"]  # without helpers: first, as it was
+    assert [w for s in one.plan.steps for w in s.waypoints] == [w for s in pick_result.plan.steps for w in s.waypoints]
+
+
+def test_a_bad_domain_is_reported_before_a_missing_contact_pose(tmp_path: Path) -> None:
+    from ldhp_tamp.errors import DomainError
+    from ldhp_tamp.tamp import _declared_actions
+
+    bad = Path(__file__).resolve().parents[1] / "data" / "domains" / "no-hand-free.pddl"
+    assert _declared_actions(bad) is not None  # the light reading accepts it: its load is deferred
+    text = PICK.read_text().replace("goal = [0, 100, 0]", "goal = [1000, 100, 0]")  # no goal contact pose
+    sc = load_scenario_string(text, "impossible", base_dir=PICK.parent)
+    with pytest.raises(DomainError, match="hand-free"):
+        solve(sc, SolveOptions(domain=bad, max_top_iterations=1))
+
+
+def test_when_the_two_readings_of_the_domain_differ_the_setup_is_made_again(pick_result, monkeypatch,
+                                                                            caplog) -> None:
+    from ldhp_tamp import tamp
+    from ldhp_tamp.domain_info import DomainActions
+
+    right = tamp._declared_actions(load_scenario(PICK).settings.domain_path)
+    assert right is not None and "flip" in right.names()
+    wrong = DomainActions(right.name, right.source, tuple(a for a in right.actions if a[0] != "flip"))
+    monkeypatch.setattr(tamp, "_declared_actions", lambda source: wrong)
+    with caplog.at_level("WARNING", logger="ldhp_tamp.tamp"):
+        res = solve(load_scenario(PICK))
+    assert "the setup again with unified-planning's" in caplog.text
+    assert res.plan.stats.grasp_graph_edges == pick_result.plan.stats.grasp_graph_edges  # flip's edges too
+    assert [w for s in res.plan.steps for w in s.waypoints] == [w for s in pick_result.plan.steps for w in s.waypoints]
