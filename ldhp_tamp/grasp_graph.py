@@ -944,8 +944,9 @@ class GraspPlanner:
                 edges = prim.impl.intra_edges(ctx, pose, rows)
                 search.checks += int(getattr(edges, "feasibility_checks", 0))
                 valid = np.ones(len(edges), dtype=np.int8)
-            order = _stable_order(np.asarray(edges.src), len(ctx.grasps))
-            edges = edges.take(order)
+            src = np.asarray(edges.src)
+            if (src[1:] < src[:-1]).any():  # (most proposals come sorted: then they are kept as they are)
+                edges = edges.take(_stable_order(src, len(ctx.grasps)))
             starts = np.searchsorted(np.asarray(edges.src), np.arange(len(ctx.grasps) + 1)).astype(np.int64)
             hit = _Cands(edges, starts, np.asarray(edges.cost(self.options.adjust), dtype=float), valid)
             self._cands[key] = hit
