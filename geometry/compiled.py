@@ -19,6 +19,7 @@ says so). The callers fall back to numpy whenever it is ``None``.
 
 from __future__ import annotations
 
+import importlib
 import logging
 import os
 from types import ModuleType
@@ -34,18 +35,26 @@ PURE_NUMPY_ENV: str = "LDHP_TAMP_PURE_NUMPY"
 
 def load() -> ModuleType | None:
     """The extension module, or ``None`` where it is not to be used (module docstring)."""
+    return load_extension("geometry._kernels", API)
+
+
+def load_extension(name: str, api: int) -> ModuleType | None:
+    """The compiled extension module ``name`` (a dotted name) of interface version ``api``,
+    or ``None``: where it was not built, where ``LDHP_TAMP_PURE_NUMPY`` is set to anything
+    but ``0``, or where the built module is of another version (a warning says so). The
+    planner's own compiled passes (``ldhp_tamp._search``) are loaded by this rule too."""
     if os.environ.get(PURE_NUMPY_ENV, "") not in ("", "0"):
         return None
     try:
-        from geometry import _kernels
-    except ImportError:  # an installation without a C compiler: numpy decides alone
+        module = importlib.import_module(name)
+    except ImportError:  # an installation without a C compiler: numpy computes alone
         return None
-    if getattr(_kernels, "API", None) != API:
-        logger.warning("%s is out of date (interface %s, this code needs %s); numpy decides until it is "
-                       "rebuilt (pip install -e .)", getattr(_kernels, "__file__", "geometry._kernels"),
-                       getattr(_kernels, "API", None), API)
+    if getattr(module, "API", None) != api:
+        logger.warning("%s is out of date (interface %s, this code needs %s); numpy computes until it is "
+                       "rebuilt (pip install -e .)", getattr(module, "__file__", name),
+                       getattr(module, "API", None), api)
         return None
-    return _kernels
+    return module
 
 
 KERNELS: ModuleType | None = load()

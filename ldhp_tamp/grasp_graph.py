@@ -50,6 +50,7 @@ import shapely
 from numpy.typing import NDArray
 
 from geometry.collision import finger_shapes
+from geometry.compiled import load_extension
 from geometry.grasps import (
     NO_CONTACT,
     FingerPart,
@@ -92,6 +93,12 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: The interface version of ``ldhp_tamp/_search.c`` this module calls (its ``API``).
+SEARCH_API = 1
+#: The compiled array passes of the search (``ldhp_tamp/_search.c``), or ``None``: numpy
+#: computes the same arrays (:func:`geometry.compiled.load_extension`).
+_search = load_extension("ldhp_tamp._search", SEARCH_API)
 
 #: mm: a pivot the judge refuses takes with it the pivots of the same finger, the same way
 #: round, on a contact at most this far from its own (GraspPlanner.reject_adjust).
@@ -1179,12 +1186,22 @@ def _checks_by_layer(search: _Search) -> Counter:
 
 
 def _stable_order(keys: IntArray, size: int) -> IntArray:
-    """``np.argsort(keys, kind="stable")`` for keys in [0, size): as 16-bit keys when they
-    fit, which numpy sorts by radix (10x faster on a layer's 300,000 slides)."""
-    k = np.asarray(keys)
-    if size <= np.iinfo(np.uint16).max + 1 and k.size:
-        k = k.astype(np.uint16)
-    return np.argsort(k, kind="stable")
+    """``np.argsort(keys, kind="stable")`` for keys in [0, size) (:func:`_csr`)."""
+    return _csr(keys, size)[0]
+
+
+def _csr(keys: IntArray, size: int) -> tuple[IntArray, IntArray]:
+    """The stable order of ``keys`` (in [0, size)) and where each key's run starts in it
+    (``size + 1`` offsets): one counting pass in the compiled module, else numpy's argsort
+    as 16-bit keys when they fit, which it sorts by radix (10x faster on a layer's 300,000
+    slides), and a binary search."""
+    k = np.ascontiguousarray(keys, dtype=np.int64)
+    if _search is not None:
+        order, starts = np.empty(k.size, dtype=np.int64), np.empty(size + 1, dtype=np.int64)
+        _search.counting_order(k, order, starts)
+        return order, starts
+    order = np.argsort(k.astype(np.uint16) if size <= np.iinfo(np.uint16).max + 1 and k.size else k, kind="stable")
+    return order, np.searchsorted(k[order], np.arange(size + 1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -1223,10 +1240,8 @@ class _LayerGraph:
         cost = cat([c.cost for c in cands], float)
         prim = cat([np.full(len(c.edges), i) for i, c in enumerate(cands)], np.int64)
         idx = cat([np.arange(len(c.edges)) for c in cands], np.int64)
-        so = _stable_order(src, size)
-        do = _stable_order(dst, size)
-        keys = np.arange(size + 1)
-        ss, ds = np.searchsorted(src[so], keys), np.searchsorted(dst[do], keys)
+        so, ss = _csr(src, size)
+        do, ds = _csr(dst, size)
         sk, dk = np.flatnonzero(np.diff(ss)), np.flatnonzero(np.diff(ds))
         return _LayerGraph(tuple(cands), size, src, dst, cost, prim, idx, so, ss, do,
                            dst[so], cost[so], sk, ss[sk], src[do], cost[do], dk, ds[dk])
@@ -1280,7 +1295,8 @@ class _Optimistic:
         n = len(inter)
         self.size = layers[0].members.shape[0]
         self.start = start
-        self.by_src: list[FloatArray | None] = [None] * (n + 1)  # edge costs, inf when infeasible
+        self.valid: list[NDArray[np.int8] | None] = [None] * (n + 1)  # each layer's edges' validity, as read
+        self.by_src: list[FloatArray | None] = [None] * (n + 1)  # numpy's edge costs, inf when infeasible
         self.by_dst: list[FloatArray | None] = [None] * (n + 1)
         self.fwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
         self.bwd: list[list[FloatArray]] = [[] for _ in range(n + 1)]
@@ -1297,31 +1313,51 @@ class _Optimistic:
         """Re-read which edges of layers ``dirty`` are known infeasible."""
         for k in dirty:
             g = self.lg[k]
-            ok = g.valid_all() >= 0
-            self.by_src[k] = np.where(ok[g.src_order], g.by_src_cost, np.inf)
-            self.by_dst[k] = np.where(ok[g.dst_order], g.by_dst_cost, np.inf)
+            self.valid[k] = g.valid_all()
+            if _search is None:  # the compiled rounds read ``valid`` edge by edge
+                ok = self.valid[k] >= 0
+                self.by_src[k] = np.where(ok[g.src_order], g.by_src_cost, np.inf)
+                self.by_dst[k] = np.where(ok[g.dst_order], g.by_dst_cost, np.inf)
+
+    def _rounds(self, k: int, h0: FloatArray, backward: bool) -> list[FloatArray]:
+        """``h0`` and the ``rounds`` Bellman-Ford rounds after it over layer k's edges
+        not known infeasible: by source (``backward``: a node's cost-to-go through its
+        cheapest edge) or by destination (cost-to-come); each round's array is the
+        element-wise minimum of the previous one and the round's relaxation."""
+        g = self.lg[k]
+        if _search is not None:
+            out = np.empty((self.rounds, self.size))
+            if backward:
+                _search.relax(g.by_src_cost, g.by_src_dst, self.valid[k], g.src_order, g.src_keys, g.src_heads,
+                              h0, out)
+            else:
+                _search.relax(g.by_dst_cost, g.by_dst_src, self.valid[k], g.dst_order, g.dst_keys, g.dst_heads,
+                              h0, out)
+            return [h0, *out]
+        cost, other, keys, heads = ((self.by_src[k], g.by_src_dst, g.src_keys, g.src_heads) if backward
+                                    else (self.by_dst[k], g.by_dst_src, g.dst_keys, g.dst_heads))
+        h = [h0]
+        for _ in range(self.rounds):
+            best = np.full(self.size, np.inf)
+            if keys.size:
+                best[keys] = np.minimum.reduceat(cost + h[-1][other], heads)
+            h.append(np.minimum(h[-1], best))
+        return h
 
     def recompute(self, lo: int, hi: int) -> tuple[list[list[FloatArray]], list[list[FloatArray]]]:
         """Recompute ``bwd`` of layers 0..hi and ``fwd`` of layers lo..n."""
-        layers, inter, lg, size, rounds = self.layers, self.inter, self.lg, self.size, self.rounds
+        layers, inter = self.layers, self.inter
         n = len(inter)
         bwd = self.bwd
         for k in range(hi, -1, -1):
-            g = lg[k]
-            cost = self.by_src[k]
-            h = [_departure_costs(layers, inter, self.release, k, bwd[k + 1][-1] if k < n else None)]
-            for _ in range(rounds):
-                best = np.full(size, np.inf)
-                if g.src_keys.size:
-                    best[g.src_keys] = np.minimum.reduceat(cost + h[-1][g.by_src_dst], g.src_heads)
-                h.append(np.minimum(h[-1], best))
-            bwd[k] = h
+            bwd[k] = self._rounds(k, _departure_costs(layers, inter, self.release, k, bwd[k + 1][-1] if k < n
+                                                      else None), backward=True)
         return self.forward(lo), bwd
 
     def forward(self, lo: int, hi: int | None = None) -> list[list[FloatArray]]:
-        """Recompute ``fwd`` of layers ``lo``..``hi`` (default n; ``by_dst`` of them
-        must be current, ``fwd`` of layer ``lo - 1`` too)."""
-        layers, inter, lg, size, rounds = self.layers, self.inter, self.lg, self.size, self.rounds
+        """Recompute ``fwd`` of layers ``lo``..``hi`` (default n; what :meth:`refresh` read
+        of them must be current, ``fwd`` of layer ``lo - 1`` too)."""
+        layers, inter, size = self.layers, self.inter, self.size
         n = len(inter)
         fwd = self.fwd
         if lo == 0:
@@ -1330,15 +1366,7 @@ class _Optimistic:
         else:
             arrive = np.where(layers[lo].members, fwd[lo - 1][-1] + inter[lo - 1], np.inf)
         for k in range(lo, n + 1 if hi is None else hi + 1):
-            g = lg[k]
-            cost = self.by_dst[k]
-            f = [arrive]
-            for _ in range(rounds):
-                best = np.full(size, np.inf)
-                if g.dst_keys.size:
-                    best[g.dst_keys] = np.minimum.reduceat(f[-1][g.by_dst_src] + cost, g.dst_heads)
-                f.append(np.minimum(f[-1], best))
-            fwd[k] = f
+            f = fwd[k] = self._rounds(k, arrive, backward=False)
             if k < n:
                 arrive = np.where(layers[k + 1].members, f[-1] + inter[k], np.inf)
         return fwd

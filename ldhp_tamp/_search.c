@@ -1,0 +1,174 @@
+/*
+ * ldhp_tamp._search: compiled twins of the grasp graph's two array passes that numpy
+ * makes as several passes over a layer's candidate edges (hundreds of thousands of
+ * them), each giving numpy's result bit for bit (the same additions, and minima, which
+ * are exact); tests pin each to its numpy form (tests/ldhp_tamp/test_search_kernels.py).
+ * ldhp_tamp.grasp_graph loads the module (or not: numpy computes alone).
+ *
+ *  - relax(cost, other, valid, order, keys, heads, h0, out): Bellman-Ford rounds of the
+ *    optimistic cost passes (grasp_graph._Optimistic). The layer's edges are grouped by
+ *    one end (CSR: group i is edges heads[i] .. heads[i + 1] - 1, or to the end, of the
+ *    node keys[i]); each round r,
+ *        best[keys[i]] = min over the group's edges j with valid[order[j]] >= 0 of
+ *                        cost[j] + prev[other[j]]
+ *        out[r] = minimum(prev, best)          (best is +inf where no edge counts)
+ *    with prev = h0 for the first round and out[r - 1] after it. numpy's form is
+ *    minimum.reduceat over cost (set to +inf where the edge is known infeasible) plus
+ *    prev gathered at other; an edge whose prev is +inf adds nothing, so it is skipped.
+ *  - counting_order(keys, order, starts): the stable order of keys in [0, size) (numpy's
+ *    argsort(kind="stable")) and, in starts (size + 1), where each key's run begins in
+ *    it (searchsorted of the sorted keys), by one counting pass.
+ *
+ * Buffers are C-contiguous: doubles, int64 (Py_ssize_t here, 64-bit on the platforms
+ * built for: checked by item size) and int8. The GIL is released while computing.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+/* the interface ldhp_tamp.grasp_graph expects (its SEARCH_API) */
+#define API_VERSION 1
+
+static void
+relax(const double *cost, const int64_t *other, const int8_t *valid, const int64_t *order, const int64_t *keys,
+      const int64_t *heads, Py_ssize_t m, Py_ssize_t E, const double *h0, double *out, Py_ssize_t size,
+      Py_ssize_t rounds)
+{
+    const double *prev = h0;
+    for (Py_ssize_t r = 0; r < rounds; r++) {
+        double *cur = out + r * size;
+        memcpy(cur, prev, (size_t)size * sizeof(double));
+        for (Py_ssize_t i = 0; i < m; i++) {
+            Py_ssize_t lo = (Py_ssize_t)heads[i], hi = i + 1 < m ? (Py_ssize_t)heads[i + 1] : E;
+            double best = INFINITY;
+            for (Py_ssize_t j = lo; j < hi; j++) {
+                double h = prev[other[j]];
+                if (h == INFINITY || valid[order[j]] < 0)
+                    continue;
+                double v = cost[j] + h;
+                if (v < best)
+                    best = v;
+            }
+            int64_t k = keys[i];
+            if (best < cur[k])
+                cur[k] = best;
+        }
+        prev = cur;
+    }
+}
+
+static void
+counting_order(const int64_t *keys, Py_ssize_t E, Py_ssize_t size, int64_t *order, int64_t *starts)
+{
+    memset(starts, 0, (size_t)(size + 1) * sizeof(int64_t));
+    for (Py_ssize_t j = 0; j < E; j++)
+        starts[keys[j] + 1]++;
+    for (Py_ssize_t i = 0; i < size; i++)
+        starts[i + 1] += starts[i];
+    /* place each key after the earlier ones of its run (starts[k] walks to the next run's
+       start), then shift the starts back by one run */
+    for (Py_ssize_t j = 0; j < E; j++)
+        order[starts[keys[j]]++] = j;
+    for (Py_ssize_t i = size; i > 0; i--)
+        starts[i] = starts[i - 1];
+    starts[0] = 0;
+}
+
+static int
+check(Py_buffer *b, Py_ssize_t itemsize, Py_ssize_t count, const char *what)
+{
+    if (!PyBuffer_IsContiguous(b, 'C') || b->len != itemsize * count) {
+        PyErr_Format(PyExc_ValueError, "%s: a C-contiguous buffer of %zd items of %zd bytes expected", what, count,
+                     itemsize);
+        return 0;
+    }
+    return 1;
+}
+
+static PyObject *
+relax_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    Py_buffer cost, other, valid, order, keys, heads, h0, out;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*w*", &cost, &other, &valid, &order, &keys, &heads, &h0, &out))
+        return NULL;
+    PyObject *result = NULL;
+    Py_buffer *all[] = {&cost, &other, &valid, &order, &keys, &heads, &h0, &out};
+    Py_ssize_t D = (Py_ssize_t)sizeof(double), I = (Py_ssize_t)sizeof(int64_t);
+    Py_ssize_t E = cost.len / D, m = keys.len / I, size = h0.len / D, V = valid.len;
+    Py_ssize_t rounds = size ? out.len / D / size : 0;
+    if (!check(&cost, D, E, "relax: cost") || !check(&other, I, E, "relax: other")
+        || !check(&valid, 1, V, "relax: valid") || !check(&order, I, E, "relax: order")
+        || !check(&keys, I, m, "relax: keys") || !check(&heads, I, m, "relax: heads")
+        || !check(&h0, D, size, "relax: h0") || !check(&out, D, rounds * size, "relax: out"))
+        goto done;
+    if (V != E) {
+        PyErr_SetString(PyExc_ValueError, "relax: valid must have one entry per edge");
+        goto done;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    relax(cost.buf, other.buf, valid.buf, order.buf, keys.buf, heads.buf, m, E, h0.buf, out.buf, size, rounds);
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
+        PyBuffer_Release(all[q]);
+    return result;
+}
+
+static PyObject *
+counting_order_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    Py_buffer keys, order, starts;
+    if (!PyArg_ParseTuple(args, "y*w*w*", &keys, &order, &starts))
+        return NULL;
+    PyObject *result = NULL;
+    Py_buffer *all[] = {&keys, &order, &starts};
+    Py_ssize_t I = (Py_ssize_t)sizeof(int64_t), E = keys.len / I, size = starts.len / I - 1;
+    if (!check(&keys, I, E, "counting_order: keys") || !check(&order, I, E, "counting_order: order")
+        || size < 0 || !check(&starts, I, size + 1, "counting_order: starts"))
+        goto done;
+    const int64_t *k = keys.buf;
+    for (Py_ssize_t j = 0; j < E; j++) {
+        if (k[j] < 0 || k[j] >= size) {
+            PyErr_Format(PyExc_ValueError, "counting_order: key %lld outside [0, %zd)", (long long)k[j], size);
+            goto done;
+        }
+    }
+    Py_BEGIN_ALLOW_THREADS
+    counting_order(k, E, size, order.buf, starts.buf);
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
+        PyBuffer_Release(all[q]);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"relax", relax_py, METH_VARARGS,
+     "relax(cost, other, valid, order, keys, heads, h0, out): Bellman-Ford rounds of the grasp graph's "
+     "optimistic passes, out[r] = minimum(prev, best) (grasp_graph._relax_numpy's result)."},
+    {"counting_order", counting_order_py, METH_VARARGS,
+     "counting_order(keys, order, starts): the stable order of keys in [0, len(starts) - 1) and where each "
+     "key's run starts in it."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "ldhp_tamp._search",
+    "Compiled array passes of the grasp graph's search (optional; numpy computes without it).",
+    -1, methods, NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC
+PyInit__search(void)
+{
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddIntConstant(m, "API", API_VERSION) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

@@ -1,0 +1,112 @@
+"""Tests of ldhp_tamp/_search.c, the grasp graph's compiled array passes: the Bellman-Ford
+rounds of the optimistic passes and the counting order give numpy's arrays bit for bit,
+and the search falls back to numpy where the module is not loaded."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+
+import numpy as np
+import pytest
+
+import geometry.compiled as compiled
+import ldhp_tamp.grasp_graph as gg
+
+search = pytest.mark.skipif(gg._search is None,
+                            reason="the compiled passes are not built, or LDHP_TAMP_PURE_NUMPY leaves them out")
+
+
+def test_the_module_is_built_where_a_compiler_is() -> None:
+    # optional like geometry's kernels: where the interpreter's compiler exists, a missing
+    # module is a broken build
+    cc = (sysconfig.get_config_var("CC") or "").split()
+    if not (cc and shutil.which(cc[0])):
+        pytest.skip("no C compiler: numpy computes alone")
+    if os.environ.get(compiled.PURE_NUMPY_ENV, "") not in ("", "0"):
+        pytest.skip(f"{compiled.PURE_NUMPY_ENV} is set: numpy computes alone")
+    assert gg._search is not None and gg._search.API == gg.SEARCH_API
+
+
+@search
+def test_numpy_alone_on_request() -> None:
+    code = "import ldhp_tamp.grasp_graph as g; print(g._search is None)"
+    for value, alone in (("1", "True"), ("0", "False")):
+        env = {**os.environ, compiled.PURE_NUMPY_ENV: value}
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+        assert out.stdout.strip() == alone, out.stderr
+
+
+def _numpy_order(keys: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    order = np.argsort(keys, kind="stable")
+    return order, np.searchsorted(keys[order], np.arange(size + 1))
+
+
+@search
+@pytest.mark.parametrize("size, count", [(1, 0), (1, 5), (7, 0), (7, 40), (5000, 160_000), (70_000, 3)])
+def test_the_counting_order_is_the_stable_argsort(size: int, count: int) -> None:
+    rng = np.random.default_rng(size + count)
+    keys = rng.integers(0, size, count)
+    keys[: count // 3] = np.sort(keys[: count // 3])  # runs already in order, and repeats
+    order, starts = gg._csr(keys, size)
+    want_order, want_starts = _numpy_order(keys, size)
+    np.testing.assert_array_equal(order, want_order)
+    np.testing.assert_array_equal(starts, want_starts)
+    assert order.dtype == np.int64 and starts.dtype == np.int64
+
+
+@search
+def test_the_counting_order_refuses_keys_out_of_range() -> None:
+    with pytest.raises(ValueError, match="outside"):
+        gg._search.counting_order(np.array([0, 3], dtype=np.int64), np.empty(2, dtype=np.int64),
+                                  np.empty(3, dtype=np.int64))
+
+
+class _Edges:
+    def __init__(self, src: np.ndarray, dst: np.ndarray) -> None:
+        self.src, self.dst = src, dst
+
+    def __len__(self) -> int:
+        return int(self.src.size)
+
+
+class _Cands:
+    def __init__(self, src, dst, cost, valid) -> None:
+        self.edges, self.cost, self.valid = _Edges(src, dst), cost, valid
+
+
+def _random_cands(rng: np.random.Generator, size: int, edges: int) -> tuple[_Cands, ...]:
+    out = []
+    for _ in range(2):
+        src = np.sort(rng.integers(0, size, edges // 2))
+        dst = rng.integers(0, size, src.size)
+        cost = np.where(rng.random(src.size) < 0.3, np.round(rng.random(src.size) * 4), rng.random(src.size) * 4)
+        valid = rng.choice(np.array([-1, 0, 1], dtype=np.int8), src.size, p=[0.2, 0.6, 0.2])
+        out.append(_Cands(src, dst, cost, valid))
+    return tuple(out)
+
+
+@search
+@pytest.mark.parametrize("size, edges", [(1, 0), (6, 0), (6, 30), (300, 4000), (5000, 120_000)])
+def test_the_compiled_rounds_are_numpys(size: int, edges: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(size * 7 + edges)
+    lg = gg._LayerGraph.of(_random_cands(rng, size, edges), size)
+    members = np.ones(size, dtype=bool)
+    layer = gg._Layer(0, np.zeros(3), b"", members, size, "s", lambda: members)
+    for start in range(min(size, 3)):
+        inter = [np.where(rng.random(size) < 0.5, rng.random(size), np.inf)]
+        runs = []
+        for module in (gg._search, None):
+            monkeypatch.setattr(gg, "_search", module)
+            opt = gg._Optimistic([layer, layer], inter, [lg, lg], start, release=False, rounds=3)
+            runs.append(opt.update({0, 1}))
+        (fwd_c, bwd_c), (fwd_n, bwd_n) = runs
+        for got, want in ((fwd_c, fwd_n), (bwd_c, bwd_n)):
+            for a, b in zip(got, want):
+                assert len(a) == len(b) == 4
+                for x, y in zip(a, b):
+                    assert np.array_equal(x, y)  # bit for bit (no NaN arises)
+    assert np.isfinite(bwd_c[0][-1]).any() or edges == 0 or size == 1
