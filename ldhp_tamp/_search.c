@@ -31,6 +31,21 @@
 /* the interface ldhp_tamp.grasp_graph expects (its SEARCH_API) */
 #define API_VERSION 1
 
+/* whether the indices of a relax() call lie where the arrays are (they come from
+   grasp_graph._LayerGraph.of; a bad one is a ValueError, not a stray read) */
+static int
+relax_indices_ok(const int64_t *other, const int64_t *order, const int64_t *keys, const int64_t *heads,
+                 Py_ssize_t m, Py_ssize_t E, Py_ssize_t size)
+{
+    for (Py_ssize_t j = 0; j < E; j++)
+        if (other[j] < 0 || other[j] >= size || order[j] < 0 || order[j] >= E)
+            return 0;
+    for (Py_ssize_t i = 0; i < m; i++)
+        if (keys[i] < 0 || keys[i] >= size || heads[i] < 0 || heads[i] > E || (i > 0 && heads[i] < heads[i - 1]))
+            return 0;
+    return 1;
+}
+
 static void
 relax(const double *cost, const int64_t *other, const int8_t *valid, const int64_t *order, const int64_t *keys,
       const int64_t *heads, Py_ssize_t m, Py_ssize_t E, const double *h0, double *out, Py_ssize_t size,
@@ -107,9 +122,16 @@ relax_py(PyObject *Py_UNUSED(self), PyObject *args)
         PyErr_SetString(PyExc_ValueError, "relax: valid must have one entry per edge");
         goto done;
     }
+    int ok;
     Py_BEGIN_ALLOW_THREADS
-    relax(cost.buf, other.buf, valid.buf, order.buf, keys.buf, heads.buf, m, E, h0.buf, out.buf, size, rounds);
+    ok = relax_indices_ok(other.buf, order.buf, keys.buf, heads.buf, m, E, size);
+    if (ok)
+        relax(cost.buf, other.buf, valid.buf, order.buf, keys.buf, heads.buf, m, E, h0.buf, out.buf, size, rounds);
     Py_END_ALLOW_THREADS
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "relax: an index outside its array (other, order, keys or heads)");
+        goto done;
+    }
     result = Py_NewRef(Py_None);
 done:
     for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)

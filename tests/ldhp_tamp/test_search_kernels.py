@@ -110,3 +110,17 @@ def test_the_compiled_rounds_are_numpys(size: int, edges: int, monkeypatch: pyte
                 for x, y in zip(a, b):
                     assert np.array_equal(x, y)  # bit for bit (no NaN arises)
     assert np.isfinite(bwd_c[0][-1]).any() or edges == 0 or size == 1
+
+
+@search
+def test_relax_refuses_indices_outside_the_arrays() -> None:
+    cost, h0, out = np.ones(2), np.array([0.0, np.inf, 0.0]), np.empty((1, 3))
+    good = dict(other=np.array([0, 2]), valid=np.zeros(2, dtype=np.int8), order=np.array([0, 1]),
+                keys=np.array([1]), heads=np.array([0]))
+    gg._search.relax(cost, good["other"], good["valid"], good["order"], good["keys"], good["heads"], h0, out)
+    np.testing.assert_array_equal(out[0], [0.0, 1.0, 0.0])
+    for name, bad in (("other", np.array([0, 3])), ("order", np.array([0, 2])), ("keys", np.array([3])),
+                      ("heads", np.array([5]))):
+        args = {**good, name: bad}
+        with pytest.raises(ValueError, match="outside"):
+            gg._search.relax(cost, args["other"], args["valid"], args["order"], args["keys"], args["heads"], h0, out)
