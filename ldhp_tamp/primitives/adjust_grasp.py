@@ -1411,6 +1411,73 @@ class Close(_AdjustGrasp):
         return _assemble(a, b, [leg])
 
 
+#: Pairs of a pivot group from which :func:`_turned_pairs` bins them rather than forming
+#: them all (below, binning costs more than it saves: task 2 has 18,000).
+TURNED_PAIRS_MIN = 100_000
+
+
+def _turned_pairs(ctx: AdjustContext, k: int, sources: IntArray, tol: float) -> tuple[IntArray, IntArray] | None:
+    """The pairs of ``_group_pairs(ctx.pivot_groups[k], sources)`` (polyline) whose
+    member may be the source turned about its pivot point, in the same (source, member)
+    order: a superset of those :meth:`Pivot._pairs` keeps, found without forming the
+    others (a 12-gon's pads on its vertices make groups of 400 grasps: 1.8 million pairs,
+    of which 8,640 are pivots).
+
+    The member b of a kept pair is the source a turned about a's pivot point c_a by their
+    orientation difference, to ``tol``: |c_a + R(delta) (p_a - c_a) - p_b| <= tol for the
+    finger's anchors p. With v = R(-phi) (p - c) in each grasp's own gripper frame (its own
+    pivot point c), that distance is |v_a - v_b - R(-phi_b) (c_b - c_a)|, and the points
+    of a group agree to ``match_tol`` in each coordinate: so a kept pair has |v_a - v_b|
+    <= tol + sqrt(2) match_tol. The grasps are binned by group and v on a grid of that
+    width and paired with the 3 x 3 cells around their own. ``None`` (all pairs are
+    formed) where there are fewer than ``TURNED_PAIRS_MIN`` pairs, some point or anchor is
+    not finite, or the bins do not fit one key."""
+    groups = ctx.pivot_groups[k]
+    gs = ctx.grasps
+    rows = groups.members
+    src = sources[groups.of[sources] >= 0]
+    if int(np.diff(groups.start)[groups.of[src]].sum()) < TURNED_PAIRS_MIN:
+        return None  # few pairs: forming them all is cheaper than binning
+    d = ctx.anchors[rows, k] - gs.contact[rows, k]
+    if not np.isfinite(d).all():
+        return None
+    phi = gs.gripper[rows, 2]
+    c, s = np.cos(phi), np.sin(phi)
+    radius = tol + math.sqrt(2.0) * ctx.options.match_tol + 1e-9  # (the last term: rounding, mm)
+    own = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)  # v of each row
+    cell = np.floor(own / radius).astype(np.int64)
+    lo = cell.min(axis=0) - 1
+    span = cell.max(axis=0) - lo + 2  # room for the neighbours' offsets
+    n_groups = int(groups.start.size - 1)
+    if float(n_groups) * float(span[0]) * float(span[1]) >= 2.0 ** 62:
+        return None
+    v = np.full((len(gs), 2), np.nan)
+    v[rows] = own
+    ix = cell - lo
+    at = np.full((len(gs), 2), -1, dtype=np.int64)
+    at[rows] = ix
+    key_of = lambda g, x, y: (g * int(span[0]) + x) * int(span[1]) + y  # noqa: E731
+    keys = key_of(groups.of[rows], ix[:, 0], ix[:, 1])
+    order = np.argsort(keys, kind="stable")
+    sorted_keys, targets = keys[order], rows[order]
+    parts_a, parts_b = [], []
+    g_src, x_src, y_src = groups.of[src], at[src, 0], at[src, 1]
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            want = key_of(g_src, x_src + dx, y_src + dy)
+            first = np.searchsorted(sorted_keys, want, side="left")
+            cnt = np.searchsorted(sorted_keys, want, side="right") - first
+            pa = np.repeat(src, cnt)
+            offs = np.repeat(first - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(int(cnt.sum()))
+            pb = targets[offs]
+            near = np.hypot(v[pa, 0] - v[pb, 0], v[pa, 1] - v[pb, 1]) <= radius
+            parts_a.append(pa[near])
+            parts_b.append(pb[near])
+    a, b = np.concatenate(parts_a), np.concatenate(parts_b)
+    by = np.argsort(a * len(gs) + b, kind="stable")
+    return a[by], b[by]
+
+
 def _pivot_centre(ctx: AdjustContext, rows: IntArray, finger: IntArray) -> FloatArray:
     """Pivot point: finger k's centre (two-point) or contact point (polyline)."""
     if ctx.is_polyline:
@@ -1509,7 +1576,9 @@ class Pivot(_AdjustGrasp):
         if hit is None:
             gs = ctx.grasps
             tol = 5.0 * ctx.options.match_tol
-            a, b = _group_pairs(ctx.pivot_groups[k], np.flatnonzero(gs.touching[:, k]))
+            sources = np.flatnonzero(gs.touching[:, k])
+            turned = _turned_pairs(ctx, k, sources, tol) if ctx.is_polyline else None
+            a, b = turned if turned is not None else _group_pairs(ctx.pivot_groups[k], sources)
             delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
             wa, wb = gs.width[a], gs.width[b]
             na, nb = gs.n_touching[a], gs.n_touching[b]

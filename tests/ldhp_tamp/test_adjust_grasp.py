@@ -410,6 +410,38 @@ def test_pivot_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(scen
         assert (np.abs(want[2]) == 2).any()  # a gripper that opens lets go of a finger turning
 
 
+@pytest.mark.parametrize("scenario, samples", [("task2_slot_insertion", 20), ("gen_slot_concave9", 100),
+                                               ("example_pick", 50)])
+def test_polyline_pivot_pairs_found_in_bins_are_those_of_every_pair(scenario: str, samples: int,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """A polyline pivot's partner is its source turned about the pad's contact point: the
+    pairs found by binning the grasps on where the anchor sits in the gripper frame
+    (_turned_pairs) are the pivots found among every pair of a group, in the same order."""
+    from pathlib import Path
+
+    from ldhp_tamp.primitives.adjust_grasp import AdjustContext, Pivot
+    from ldhp_tamp.scenario import load_scenario
+
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / f"{scenario}.toml")
+    gs = enumerate_grasps(sc.world, GraspOptions(samples_per_edge=samples))
+    # the anchors moved by up to 0.9 tol each way: partners on both sides of the tolerance
+    tol = 5.0 * AdjustContext(sc.world, gs).options.match_tol
+    shake = np.random.default_rng(3).uniform(-0.9 * tol, 0.9 * tol, (len(gs), 2, 2))
+    found = {}
+    for binned in (True, False):
+        monkeypatch.setattr(ag, "TURNED_PAIRS_MIN", 0 if binned else 10 ** 18)
+        ctx = AdjustContext(sc.world, gs)
+        assert ctx.is_polyline
+        ctx.__dict__["anchors"] = ctx.anchors + shake  # (a cached property)
+        if binned:
+            assert ag._turned_pairs(ctx, 0, np.flatnonzero(gs.touching[:, 0]), 5.0 * ctx.options.match_tol) is not None
+        found[binned] = [Pivot._pairs(ctx, k) for k in range(2)]
+    assert sum(p[0].size for p in found[True]) > 100
+    for mine, every in zip(found[True], found[False]):
+        for x, y in zip(mine, every):
+            np.testing.assert_array_equal(x, y)
+
+
 def test_a_pinch_lets_go_of_a_finger_turning_about_the_other(ranged: Case):
     """A pinch's width and orientation come from where its second finger meets the
     object, a one-finger grasp's from a few fixed widths and orientations: most pinches
