@@ -171,7 +171,7 @@ done:
 static PyMethodDef methods[] = {
     {"relax", relax_py, METH_VARARGS,
      "relax(cost, other, valid, order, keys, heads, h0, out): Bellman-Ford rounds of the grasp graph's "
-     "optimistic passes, out[r] = minimum(prev, best) (grasp_graph._relax_numpy's result)."},
+     "optimistic passes, out[r] = minimum(prev, best) (the numpy form in grasp_graph._Optimistic._rounds)."},
     {"counting_order", counting_order_py, METH_VARARGS,
      "counting_order(keys, order, starts): the stable order of keys in [0, len(starts) - 1) and where each "
      "key's run starts in it."},
