@@ -65,7 +65,7 @@ def test_the_counting_order_refuses_keys_out_of_range() -> None:
                                   np.empty(3, dtype=np.int64))
 
 
-class _Edges:
+class _Edges:  # stand-ins for a primitive's candidates: what _LayerGraph.of reads of them
     def __init__(self, src: np.ndarray, dst: np.ndarray) -> None:
         self.src, self.dst = src, dst
 
@@ -108,7 +108,7 @@ def test_the_compiled_rounds_are_numpys(size: int, edges: int, monkeypatch: pyte
             for a, b in zip(got, want):
                 assert len(a) == len(b) == 4
                 for x, y in zip(a, b):
-                    assert np.array_equal(x, y)  # bit for bit (no NaN arises)
+                    assert np.array_equal(x, y)  # the same values (no NaN arises)
     assert np.isfinite(bwd_c[0][-1]).any() or edges == 0 or size == 1
 
 
