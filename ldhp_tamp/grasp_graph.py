@@ -398,12 +398,10 @@ class _Layer:
 @dataclass(frozen=True, eq=False)
 class _Cands:
     """The candidate intra-pose edges of one primitive at one layer, sorted by source
-    (CSR: the edges of grasp g are ``starts[g]:starts[g + 1]``), with their costs and
-    what is known of their feasibility (0 unknown, 1 feasible, -1 not), kept across
-    solves."""
+    (stably: the order the search breaks ties in), with their costs and what is known of
+    their feasibility (0 unknown, 1 feasible, -1 not), kept across solves."""
 
     edges: IntraEdges
-    starts: IntArray
     cost: FloatArray
     valid: NDArray[np.int8]
 
@@ -953,9 +951,8 @@ class GraspPlanner:
                 valid = np.ones(len(edges), dtype=np.int8)
             src = np.asarray(edges.src)
             if (src[1:] < src[:-1]).any():  # (most proposals come sorted: then they are kept as they are)
-                edges = edges.take(_stable_order(src, len(ctx.grasps)))
-            starts = np.searchsorted(np.asarray(edges.src), np.arange(len(ctx.grasps) + 1)).astype(np.int64)
-            hit = _Cands(edges, starts, np.asarray(edges.cost(self.options.adjust), dtype=float), valid)
+                edges = edges.take(_csr(src, len(ctx.grasps))[0])
+            hit = _Cands(edges, np.asarray(edges.cost(self.options.adjust), dtype=float), valid)
             self._cands[key] = hit
             while len(self._cands) > max(1, self.options.cache_poses) * max(1, len(self.primitives)):
                 self._cands.popitem(last=False)
@@ -1183,11 +1180,6 @@ def _checks_by_layer(search: _Search) -> Counter:
         if st.get("checked"):
             spent[layer] += st["checked"]
     return spent
-
-
-def _stable_order(keys: IntArray, size: int) -> IntArray:
-    """``np.argsort(keys, kind="stable")`` for keys in [0, size) (:func:`_csr`)."""
-    return _csr(keys, size)[0]
 
 
 def _csr(keys: IntArray, size: int) -> tuple[IntArray, IntArray]:

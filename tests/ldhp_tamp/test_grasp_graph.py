@@ -452,7 +452,7 @@ def test_a_refused_pivot_takes_the_pivots_like_it_along(pick: Scenario, pick_gra
     every = np.ones(len(pick_grasps), dtype=bool)
     edges = Pivot().propose(planner.context, pick.start, np.arange(1, len(pick_grasps)), every)
     n = len(edges)
-    cands = _Cands(edges, np.zeros(len(pick_grasps) + 1, dtype=np.int64), np.zeros(n), np.zeros(n, dtype=np.int8))
+    cands = _Cands(edges, np.zeros(n), np.zeros(n, dtype=np.int8))
     i = 0
     k = int(edges.finger[i])
     assert planner.reject_adjust(SimpleNamespace(adjust_edges=[(cands, i)]), 0)
