@@ -1,26 +1,33 @@
 /*
- * ldhp_tamp._search: compiled twins of the grasp graph's two array passes that numpy
- * makes as several passes over a layer's candidate edges (hundreds of thousands of
- * them), each giving numpy's result bit for bit (the same additions, and minima, which
- * are exact); tests pin each to its numpy form (tests/ldhp_tamp/test_search_kernels.py).
+ * ldhp_tamp._search: compiled twins of the grasp graph's array passes that numpy makes as
+ * several passes over a layer's candidate edges (hundreds of thousands of them), each
+ * giving numpy's result bit for bit (the same additions, and minima, which are exact);
+ * tests pin each to its numpy form (tests/ldhp_tamp/test_search_kernels.py).
  * ldhp_tamp.grasp_graph loads the module (or not: numpy computes alone).
  *
- *  - relax(cost, other, valid, order, keys, heads, h0, out): Bellman-Ford rounds of the
- *    optimistic cost passes (grasp_graph._Optimistic). The layer's edges are grouped by
- *    one end (CSR: group i is edges heads[i] .. heads[i + 1] - 1, or to the end, of the
- *    node keys[i]); each round r,
+ * A layer's edges are kept in one order, by source (grasp_graph._LayerGraph): group i is
+ * the edges heads[i] .. heads[i + 1] - 1 (or to the end) of the source keys[i]; other[j]
+ * is edge j's destination, cost[j] its cost, order[j] its index among the layer's
+ * candidates (where valid[] says whether it is known infeasible, < 0).
+ *
+ *  - relax(cost, other, valid, order, keys, heads, h0, out): the backward Bellman-Ford
+ *    rounds of the optimistic cost passes (grasp_graph._Optimistic), each
  *        best[keys[i]] = min over the group's edges j with valid[order[j]] >= 0 of
  *                        cost[j] + prev[other[j]]
  *        out[r] = minimum(prev, best)          (best is +inf where no edge counts)
  *    with prev = h0 for the first round and out[r - 1] after it. numpy's form is
  *    minimum.reduceat over cost (set to +inf where the edge is known infeasible) plus
  *    prev gathered at other; an edge whose prev is +inf adds nothing, so it is skipped.
+ *  - spread(cost, other, valid, order, keys, heads, h0, out): the forward rounds over the
+ *    same groups, each edge's cost[j] + prev[keys[i]] lowering out[r][other[j]] (numpy's
+ *    form groups the edges by destination; the minimum is the same, as is each sum).
  *  - counting_order(keys, order, starts): the stable order of keys in [0, size) (numpy's
  *    argsort(kind="stable")) and, in starts (size + 1), where each key's run begins in
  *    it (searchsorted of the sorted keys), by one counting pass.
  *
- * Buffers are C-contiguous: doubles, int64 (Py_ssize_t here, 64-bit on the platforms
- * built for: checked by item size) and int8. The GIL is released while computing.
+ * Buffers are C-contiguous: doubles, int32 (the indices: a layer's edges and grasps are
+ * far fewer than 2^31), int8, and counting_order's keys int64. The GIL is released while
+ * computing.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -29,13 +36,13 @@
 #include <string.h>
 
 /* the interface ldhp_tamp.grasp_graph expects (its SEARCH_API) */
-#define API_VERSION 1
+#define API_VERSION 2
 
-/* whether the indices of a relax() call lie where the arrays are (they come from
-   grasp_graph._LayerGraph.of; a bad one is a ValueError, not a stray read) */
+/* whether the indices of a relax() or spread() call lie where the arrays are (they come
+   from grasp_graph._LayerGraph.of; a bad one is a ValueError, not a stray read) */
 static int
-relax_indices_ok(const int64_t *other, const int64_t *order, const int64_t *keys, const int64_t *heads,
-                 Py_ssize_t m, Py_ssize_t E, Py_ssize_t size)
+indices_ok(const int32_t *other, const int32_t *order, const int32_t *keys, const int32_t *heads,
+           Py_ssize_t m, Py_ssize_t E, Py_ssize_t size)
 {
     for (Py_ssize_t j = 0; j < E; j++)
         if (other[j] < 0 || other[j] >= size || order[j] < 0 || order[j] >= E)
@@ -47,8 +54,8 @@ relax_indices_ok(const int64_t *other, const int64_t *order, const int64_t *keys
 }
 
 static void
-relax(const double *cost, const int64_t *other, const int8_t *valid, const int64_t *order, const int64_t *keys,
-      const int64_t *heads, Py_ssize_t m, Py_ssize_t E, const double *h0, double *out, Py_ssize_t size,
+relax(const double *cost, const int32_t *other, const int8_t *valid, const int32_t *order, const int32_t *keys,
+      const int32_t *heads, Py_ssize_t m, Py_ssize_t E, const double *h0, double *out, Py_ssize_t size,
       Py_ssize_t rounds)
 {
     const double *prev = h0;
@@ -66,7 +73,7 @@ relax(const double *cost, const int64_t *other, const int8_t *valid, const int64
                 if (v < best)
                     best = v;
             }
-            int64_t k = keys[i];
+            int32_t k = keys[i];
             if (best < cur[k])
                 cur[k] = best;
         }
@@ -75,9 +82,36 @@ relax(const double *cost, const int64_t *other, const int8_t *valid, const int64
 }
 
 static void
-counting_order(const int64_t *keys, Py_ssize_t E, Py_ssize_t size, int64_t *order, int64_t *starts)
+spread(const double *cost, const int32_t *other, const int8_t *valid, const int32_t *order, const int32_t *keys,
+       const int32_t *heads, Py_ssize_t m, Py_ssize_t E, const double *h0, double *out, Py_ssize_t size,
+       Py_ssize_t rounds)
 {
-    memset(starts, 0, (size_t)(size + 1) * sizeof(int64_t));
+    const double *prev = h0;
+    for (Py_ssize_t r = 0; r < rounds; r++) {
+        double *cur = out + r * size;
+        memcpy(cur, prev, (size_t)size * sizeof(double));
+        for (Py_ssize_t i = 0; i < m; i++) {
+            double h = prev[keys[i]];
+            if (h == INFINITY)
+                continue;
+            Py_ssize_t lo = (Py_ssize_t)heads[i], hi = i + 1 < m ? (Py_ssize_t)heads[i + 1] : E;
+            for (Py_ssize_t j = lo; j < hi; j++) {
+                if (valid[order[j]] < 0)
+                    continue;
+                double v = cost[j] + h;
+                int32_t d = other[j];
+                if (v < cur[d])
+                    cur[d] = v;
+            }
+        }
+        prev = cur;
+    }
+}
+
+static void
+counting_order(const int64_t *keys, Py_ssize_t E, Py_ssize_t size, int32_t *order, int32_t *starts)
+{
+    memset(starts, 0, (size_t)(size + 1) * sizeof(int32_t));
     for (Py_ssize_t j = 0; j < E; j++)
         starts[keys[j] + 1]++;
     for (Py_ssize_t i = 0; i < size; i++)
@@ -85,51 +119,55 @@ counting_order(const int64_t *keys, Py_ssize_t E, Py_ssize_t size, int64_t *orde
     /* place each key after the earlier ones of its run (starts[k] walks to the next run's
        start), then shift the starts back by one run */
     for (Py_ssize_t j = 0; j < E; j++)
-        order[starts[keys[j]]++] = j;
+        order[starts[keys[j]]++] = (int32_t)j;
     for (Py_ssize_t i = size; i > 0; i--)
         starts[i] = starts[i - 1];
     starts[0] = 0;
 }
 
 static int
-check(Py_buffer *b, Py_ssize_t itemsize, Py_ssize_t count, const char *what)
+check(Py_buffer *b, Py_ssize_t itemsize, Py_ssize_t count, const char *name, const char *what)
 {
     if (!PyBuffer_IsContiguous(b, 'C') || b->len != itemsize * count) {
-        PyErr_Format(PyExc_ValueError, "%s: a C-contiguous buffer of %zd items of %zd bytes expected", what, count,
-                     itemsize);
+        PyErr_Format(PyExc_ValueError, "%s: %s: a C-contiguous buffer of %zd items of %zd bytes expected", name,
+                     what, count, itemsize);
         return 0;
     }
     return 1;
 }
 
+typedef void (*pass_fn)(const double *, const int32_t *, const int8_t *, const int32_t *, const int32_t *,
+                        const int32_t *, Py_ssize_t, Py_ssize_t, const double *, double *, Py_ssize_t, Py_ssize_t);
+
+/* relax() and spread() take the same arguments */
 static PyObject *
-relax_py(PyObject *Py_UNUSED(self), PyObject *args)
+rounds_py(PyObject *args, const char *name, pass_fn fn)
 {
     Py_buffer cost, other, valid, order, keys, heads, h0, out;
     if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*w*", &cost, &other, &valid, &order, &keys, &heads, &h0, &out))
         return NULL;
     PyObject *result = NULL;
     Py_buffer *all[] = {&cost, &other, &valid, &order, &keys, &heads, &h0, &out};
-    Py_ssize_t D = (Py_ssize_t)sizeof(double), I = (Py_ssize_t)sizeof(int64_t);
+    Py_ssize_t D = (Py_ssize_t)sizeof(double), I = (Py_ssize_t)sizeof(int32_t);
     Py_ssize_t E = cost.len / D, m = keys.len / I, size = h0.len / D, V = valid.len;
     Py_ssize_t rounds = size ? out.len / D / size : 0;
-    if (!check(&cost, D, E, "relax: cost") || !check(&other, I, E, "relax: other")
-        || !check(&valid, 1, V, "relax: valid") || !check(&order, I, E, "relax: order")
-        || !check(&keys, I, m, "relax: keys") || !check(&heads, I, m, "relax: heads")
-        || !check(&h0, D, size, "relax: h0") || !check(&out, D, rounds * size, "relax: out"))
+    if (!check(&cost, D, E, name, "cost") || !check(&other, I, E, name, "other")
+        || !check(&valid, 1, V, name, "valid") || !check(&order, I, E, name, "order")
+        || !check(&keys, I, m, name, "keys") || !check(&heads, I, m, name, "heads")
+        || !check(&h0, D, size, name, "h0") || !check(&out, D, rounds * size, name, "out"))
         goto done;
     if (V != E) {
-        PyErr_SetString(PyExc_ValueError, "relax: valid must have one entry per edge");
+        PyErr_Format(PyExc_ValueError, "%s: valid must have one entry per edge", name);
         goto done;
     }
     int ok;
     Py_BEGIN_ALLOW_THREADS
-    ok = relax_indices_ok(other.buf, order.buf, keys.buf, heads.buf, m, E, size);
+    ok = indices_ok(other.buf, order.buf, keys.buf, heads.buf, m, E, size);
     if (ok)
-        relax(cost.buf, other.buf, valid.buf, order.buf, keys.buf, heads.buf, m, E, h0.buf, out.buf, size, rounds);
+        fn(cost.buf, other.buf, valid.buf, order.buf, keys.buf, heads.buf, m, E, h0.buf, out.buf, size, rounds);
     Py_END_ALLOW_THREADS
     if (!ok) {
-        PyErr_SetString(PyExc_ValueError, "relax: an index outside its array (other, order, keys or heads)");
+        PyErr_Format(PyExc_ValueError, "%s: an index outside its array (other, order, keys or heads)", name);
         goto done;
     }
     result = Py_NewRef(Py_None);
@@ -140,6 +178,18 @@ done:
 }
 
 static PyObject *
+relax_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    return rounds_py(args, "relax", relax);
+}
+
+static PyObject *
+spread_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    return rounds_py(args, "spread", spread);
+}
+
+static PyObject *
 counting_order_py(PyObject *Py_UNUSED(self), PyObject *args)
 {
     Py_buffer keys, order, starts;
@@ -147,10 +197,15 @@ counting_order_py(PyObject *Py_UNUSED(self), PyObject *args)
         return NULL;
     PyObject *result = NULL;
     Py_buffer *all[] = {&keys, &order, &starts};
-    Py_ssize_t I = (Py_ssize_t)sizeof(int64_t), E = keys.len / I, size = starts.len / I - 1;
-    if (!check(&keys, I, E, "counting_order: keys") || !check(&order, I, E, "counting_order: order")
-        || size < 0 || !check(&starts, I, size + 1, "counting_order: starts"))
+    Py_ssize_t K = (Py_ssize_t)sizeof(int64_t), I = (Py_ssize_t)sizeof(int32_t);
+    Py_ssize_t E = keys.len / K, size = starts.len / I - 1;
+    if (!check(&keys, K, E, "counting_order", "keys") || !check(&order, I, E, "counting_order", "order")
+        || size < 0 || !check(&starts, I, size + 1, "counting_order", "starts"))
         goto done;
+    if (E > INT32_MAX) {
+        PyErr_SetString(PyExc_ValueError, "counting_order: more than 2^31 - 1 keys");
+        goto done;
+    }
     const int64_t *k = keys.buf;
     for (Py_ssize_t j = 0; j < E; j++) {
         if (k[j] < 0 || k[j] >= size) {
@@ -172,6 +227,10 @@ static PyMethodDef methods[] = {
     {"relax", relax_py, METH_VARARGS,
      "relax(cost, other, valid, order, keys, heads, h0, out): Bellman-Ford rounds of the grasp graph's "
      "optimistic passes, out[r] = minimum(prev, best) (the numpy form in grasp_graph._Optimistic._rounds)."},
+    {"spread", spread_py, METH_VARARGS,
+     "spread(cost, other, valid, order, keys, heads, h0, out): the forward rounds over the same source groups, "
+     "out[r] = minimum(prev, best) with best[other[j]] the least cost[j] + prev[source] (the numpy form in "
+     "grasp_graph._Optimistic._rounds groups by destination)."},
     {"counting_order", counting_order_py, METH_VARARGS,
      "counting_order(keys, order, starts): the stable order of keys in [0, len(starts) - 1) and where each "
      "key's run starts in it."},

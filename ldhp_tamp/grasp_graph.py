@@ -95,7 +95,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: The interface version of ``ldhp_tamp/_search.c`` this module calls (its ``API``).
-SEARCH_API = 1
+SEARCH_API = 2
 #: The compiled array passes of the search (``ldhp_tamp/_search.c``), or ``None``: numpy
 #: computes the same arrays (:func:`geometry.compiled.load_extension`).
 _search = load_extension("ldhp_tamp._search", SEARCH_API)
@@ -1184,68 +1184,79 @@ def _checks_by_layer(search: _Search) -> Counter:
 
 def _csr(keys: IntArray, size: int) -> tuple[IntArray, IntArray]:
     """The stable order of ``keys`` (in [0, size)) and where each key's run starts in it
-    (``size + 1`` offsets): one counting pass in the compiled module, else numpy's argsort
-    as 16-bit keys when they fit, which it sorts by radix (10x faster on a layer's 300,000
-    slides), and a binary search."""
+    (``size + 1`` offsets), both int32: one counting pass in the compiled module, else
+    numpy's argsort as 16-bit keys when they fit, which it sorts by radix (10x faster on a
+    layer's 300,000 slides), and a binary search."""
     k = np.ascontiguousarray(keys, dtype=np.int64)
+    if k.size > np.iinfo(np.int32).max or size > np.iinfo(np.int32).max:
+        raise ValueError(f"{k.size} edges among {size} grasps: the search indexes them with 32 bits")
     if _search is not None:
-        order, starts = np.empty(k.size, dtype=np.int64), np.empty(size + 1, dtype=np.int64)
+        order, starts = np.empty(k.size, dtype=np.int32), np.empty(size + 1, dtype=np.int32)
         _search.counting_order(k, order, starts)
         return order, starts
     order = np.argsort(k.astype(np.uint16) if size <= np.iinfo(np.uint16).max + 1 and k.size else k, kind="stable")
-    return order, np.searchsorted(k[order], np.arange(size + 1))
+    return order.astype(np.int32), np.searchsorted(k[order], np.arange(size + 1)).astype(np.int32)
 
 
 @dataclass(frozen=True, eq=False)
 class _LayerGraph:
-    """The candidate intra-pose edges of one layer, all primitives concatenated, with
-    their orders by source and by destination for vectorised min-reductions."""
+    """The candidate intra-pose edges of one layer, all primitives', in one order: by
+    source (stable, so a source's edges keep the candidates' order), the form the
+    Bellman-Ford rounds and the path extraction read. An edge's *index* is its place in
+    the primitives' candidates concatenated (``offsets`` says where each primitive's
+    begin); its *position* is its place in the source order."""
 
     cands: tuple[_Cands, ...]
     size: int
-    src: IntArray
-    dst: IntArray
-    cost: FloatArray
-    prim: IntArray
-    idx: IntArray
-    src_order: IntArray
-    src_starts: IntArray
-    dst_order: IntArray
-    # copies in source and in destination order, so that a Bellman-Ford round reduces
-    # contiguous runs without gathering (the keys that have edges, and where they start)
-    by_src_dst: IntArray
-    by_src_cost: FloatArray
-    src_keys: IntArray
-    src_heads: IntArray
-    by_dst_src: IntArray
-    by_dst_cost: FloatArray
-    dst_keys: IntArray
-    dst_heads: IntArray
+    offsets: IntArray  # (P + 1,) where each primitive's candidates begin among the indices
+    order: IntArray  # (E,) int32: the index of the edge at each position
+    starts: IntArray  # (size + 1,) int32: where each grasp's edges (as source) begin
+    dst: IntArray  # (E,) int32, by position
+    cost: FloatArray  # (E,), by position
+    keys: IntArray  # int32: the sources that have edges
+    heads: IntArray  # int32: where their edges begin
 
     @staticmethod
     def of(cands: Sequence[_Cands], size: int) -> "_LayerGraph":
-        def cat(xs: list[np.ndarray], dtype: Any) -> np.ndarray:
-            return np.concatenate(xs).astype(dtype) if xs else np.zeros(0, dtype=dtype)
-
-        src = cat([np.asarray(c.edges.src) for c in cands], np.int64)
-        dst = cat([np.asarray(c.edges.dst) for c in cands], np.int64)
-        cost = cat([c.cost for c in cands], float)
-        prim = cat([np.full(len(c.edges), i) for i, c in enumerate(cands)], np.int64)
-        idx = cat([np.arange(len(c.edges)) for c in cands], np.int64)
-        so, ss = _csr(src, size)
-        do, ds = _csr(dst, size)
-        sk, dk = np.flatnonzero(np.diff(ss)), np.flatnonzero(np.diff(ds))
-        return _LayerGraph(tuple(cands), size, src, dst, cost, prim, idx, so, ss, do,
-                           dst[so], cost[so], sk, ss[sk], src[do], cost[do], dk, ds[dk])
+        counts = [len(c.edges) for c in cands]
+        offsets = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)]).astype(np.int64)
+        if not sum(counts):
+            none = np.zeros(0, dtype=np.int32)
+            return _LayerGraph(tuple(cands), size, offsets, none, np.zeros(size + 1, dtype=np.int32), none,
+                               np.zeros(0), none, none)
+        order, starts = _csr(np.concatenate([np.asarray(c.edges.src) for c in cands]), size)
+        dst = np.concatenate([np.asarray(c.edges.dst) for c in cands])[order].astype(np.int32)
+        cost = np.concatenate([np.asarray(c.cost, dtype=float) for c in cands])[order]
+        keys = np.flatnonzero(np.diff(starts)).astype(np.int32)
+        return _LayerGraph(tuple(cands), size, offsets, order, starts, dst, cost, keys, starts[keys])
 
     def valid_all(self) -> NDArray[np.int8]:
-        """(E,) 0 unknown, 1 feasible, -1 infeasible (current knowledge)."""
+        """(E,) by index: 0 unknown, 1 feasible, -1 infeasible (current knowledge)."""
         if not self.cands:
             return np.zeros(0, dtype=np.int8)
         return np.concatenate([c.valid for c in self.cands])
 
     def valid(self, prim: int, index: int) -> int:
         return int(self.cands[prim].valid[index])
+
+    def edge(self, index: int) -> tuple[int, int]:
+        """(primitive, candidate) of the edge of index ``index``."""
+        prim = int(np.searchsorted(self.offsets, index, side="right")) - 1
+        return prim, int(index - self.offsets[prim])
+
+    @functools.cached_property
+    def src(self) -> IntArray:
+        """(E,) int32, by position: each edge's source."""
+        return np.repeat(np.arange(self.size, dtype=np.int32), np.diff(self.starts))
+
+    @functools.cached_property
+    def by_dst(self) -> tuple[IntArray, IntArray, FloatArray, IntArray, IntArray]:
+        """numpy's forward rounds (without the compiled module) group the edges by
+        destination: (the positions in that order, their sources, their costs, the
+        destinations that have edges, where they begin)."""
+        order, starts = _csr(self.dst, self.size)
+        keys = np.flatnonzero(np.diff(starts))
+        return order, self.src[order], self.cost[order], keys, starts[keys]
 
 
 def _departure_costs(layers: list[_Layer], inter: list[FloatArray], release: bool, k: int,
@@ -1307,27 +1318,28 @@ class _Optimistic:
             g = self.lg[k]
             self.valid[k] = g.valid_all()
             if _search is None:  # the compiled rounds read ``valid`` edge by edge
-                ok = self.valid[k] >= 0
-                self.by_src[k] = np.where(ok[g.src_order], g.by_src_cost, np.inf)
-                self.by_dst[k] = np.where(ok[g.dst_order], g.by_dst_cost, np.inf)
+                ok = self.valid[k][g.order] >= 0
+                self.by_src[k] = np.where(ok, g.cost, np.inf)
+                self.by_dst[k] = np.where(ok[g.by_dst[0]], g.by_dst[2], np.inf)
 
     def _rounds(self, k: int, h0: FloatArray, backward: bool) -> list[FloatArray]:
         """``h0`` and the ``rounds`` Bellman-Ford rounds after it over layer k's edges
-        not known infeasible: by source (``backward``: a node's cost-to-go through its
-        cheapest edge) or by destination (cost-to-come); each round's array is the
-        element-wise minimum of the previous one and the round's relaxation."""
+        not known infeasible: backward (``backward``: a node's cost-to-go through its
+        cheapest edge) or forward (cost-to-come); each round's array is the element-wise
+        minimum of the previous one and the round's relaxation. Compiled, both walk the
+        edges by source (the forward rounds lower each edge's destination); numpy groups
+        them by the end it reduces at."""
         g = self.lg[k]
         if _search is not None:
             out = np.empty((self.rounds, self.size))
-            if backward:
-                _search.relax(g.by_src_cost, g.by_src_dst, self.valid[k], g.src_order, g.src_keys, g.src_heads,
-                              h0, out)
-            else:
-                _search.relax(g.by_dst_cost, g.by_dst_src, self.valid[k], g.dst_order, g.dst_keys, g.dst_heads,
-                              h0, out)
+            (_search.relax if backward else _search.spread)(g.cost, g.dst, self.valid[k], g.order, g.keys, g.heads,
+                                                             h0, out)
             return [h0, *out]
-        cost, other, keys, heads = ((self.by_src[k], g.by_src_dst, g.src_keys, g.src_heads) if backward
-                                    else (self.by_dst[k], g.by_dst_src, g.dst_keys, g.dst_heads))
+        if backward:
+            cost, other, keys, heads = self.by_src[k], g.dst, g.keys, g.heads
+        else:
+            _, other, _, keys, heads = g.by_dst
+            cost = self.by_dst[k]
         h = [h0]
         for _ in range(self.rounds):
             best = np.full(self.size, np.inf)
@@ -1387,15 +1399,14 @@ def _extract(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph
             edges.append(None)
             continue
         lay = lg[k]
-        lo, hi = int(lay.src_starts[g]), int(lay.src_starts[g + 1])
-        e = lay.src_order[lo:hi]
-        ok = lay.valid_all()[e] >= 0
-        vals = np.where(ok, lay.cost[e] + h[r - 1][lay.dst[e]], np.inf)
-        j = int(e[int(np.argmin(vals))])
-        g = int(lay.dst[j])
+        lo, hi = int(lay.starts[g]), int(lay.starts[g + 1])
+        ok = lay.valid_all()[lay.order[lo:hi]] >= 0
+        vals = np.where(ok, lay.cost[lo:hi] + h[r - 1][lay.dst[lo:hi]], np.inf)
+        at = lo + int(np.argmin(vals))
+        g = int(lay.dst[at])
         r -= 1
         nodes.append((k, g))
-        edges.append((k, int(lay.prim[j]), int(lay.idx[j])))
+        edges.append((k, *lay.edge(int(lay.order[at]))))
 
 
 def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[FloatArray]], best: float,
@@ -1411,13 +1422,17 @@ def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[F
     count = len(must)
     rows = []
     for k, lay in enumerate(lg):
-        if not lay.src.size or (layer is not None and k != layer):
+        if not lay.order.size or (layer is not None and k != layer):
             continue
-        unk = lay.valid_all() == 0
+        unk = lay.valid_all()[lay.order] == 0
         f = fwd[k][-1][lay.src] + lay.cost + bwd[k][-1][lay.dst]
         sel = np.flatnonzero(unk & (f <= best + slack))
         if sel.size:
-            rows.append((f[sel], np.full(sel.size, k), lay.prim[sel], lay.idx[sel]))
+            index = lay.order[sel]
+            by_index = np.argsort(index)  # the candidates' order, in which ties are broken
+            index = index[by_index].astype(np.int64)
+            prim = np.searchsorted(lay.offsets, index, side="right") - 1
+            rows.append((f[sel][by_index], np.full(sel.size, k), prim, index - lay.offsets[prim]))
     if rows:
         f, ks, ps, ix = (np.concatenate(x) for x in zip(*rows))
         for j in np.argsort(f, kind="stable"):

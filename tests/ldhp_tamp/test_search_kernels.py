@@ -1,6 +1,6 @@
 """Tests of ldhp_tamp/_search.c, the grasp graph's compiled array passes: the Bellman-Ford
-rounds of the optimistic passes and the counting order give numpy's arrays bit for bit,
-and the search falls back to numpy where the module is not loaded."""
+rounds of the optimistic passes (backward and forward) and the counting order give numpy's
+arrays bit for bit, and the search falls back to numpy where the module is not loaded."""
 
 from __future__ import annotations
 
@@ -55,14 +55,14 @@ def test_the_counting_order_is_the_stable_argsort(size: int, count: int) -> None
     want_order, want_starts = _numpy_order(keys, size)
     np.testing.assert_array_equal(order, want_order)
     np.testing.assert_array_equal(starts, want_starts)
-    assert order.dtype == np.int64 and starts.dtype == np.int64
+    assert order.dtype == np.int32 and starts.dtype == np.int32
 
 
 @search
 def test_the_counting_order_refuses_keys_out_of_range() -> None:
     with pytest.raises(ValueError, match="outside"):
-        gg._search.counting_order(np.array([0, 3], dtype=np.int64), np.empty(2, dtype=np.int64),
-                                  np.empty(3, dtype=np.int64))
+        gg._search.counting_order(np.array([0, 3], dtype=np.int64), np.empty(2, dtype=np.int32),
+                                  np.empty(3, dtype=np.int32))
 
 
 class _Edges:  # stand-ins for a primitive's candidates: what _LayerGraph.of reads of them
@@ -113,14 +113,36 @@ def test_the_compiled_rounds_are_numpys(size: int, edges: int, monkeypatch: pyte
 
 
 @search
-def test_relax_refuses_indices_outside_the_arrays() -> None:
+@pytest.mark.parametrize("name", ["relax", "spread"])
+def test_the_rounds_refuse_indices_outside_the_arrays(name: str) -> None:
+    rounds = getattr(gg._search, name)
+
+    def i32(*x: int) -> np.ndarray:
+        return np.array(x, dtype=np.int32)
+
     cost, h0, out = np.ones(2), np.array([0.0, np.inf, 0.0]), np.empty((1, 3))
-    good = dict(other=np.array([0, 2]), valid=np.zeros(2, dtype=np.int8), order=np.array([0, 1]),
-                keys=np.array([1]), heads=np.array([0]))
-    gg._search.relax(cost, good["other"], good["valid"], good["order"], good["keys"], good["heads"], h0, out)
-    np.testing.assert_array_equal(out[0], [0.0, 1.0, 0.0])
-    for name, bad in (("other", np.array([0, 3])), ("order", np.array([0, 2])), ("keys", np.array([3])),
-                      ("heads", np.array([5]))):
-        args = {**good, name: bad}
+    good = dict(other=i32(0, 2), valid=np.zeros(2, dtype=np.int8), order=i32(0, 1), keys=i32(1), heads=i32(0))
+    rounds(cost, good["other"], good["valid"], good["order"], good["keys"], good["heads"], h0, out)
+    # the edges 1 -> 0 and 1 -> 2 of cost 1: backward, grasp 1 is 1 from a zero; forward,
+    # grasp 1 (unreached) lowers nothing
+    np.testing.assert_array_equal(out[0], [0.0, 1.0, 0.0] if name == "relax" else [0.0, np.inf, 0.0])
+    for what, bad in (("other", i32(0, 3)), ("order", i32(0, 2)), ("keys", i32(3)), ("heads", i32(5))):
+        args = {**good, what: bad}
         with pytest.raises(ValueError, match="outside"):
-            gg._search.relax(cost, args["other"], args["valid"], args["order"], args["keys"], args["heads"], h0, out)
+            rounds(cost, args["other"], args["valid"], args["order"], args["keys"], args["heads"], h0, out)
+    with pytest.raises(ValueError, match="C-contiguous"):  # 64-bit indices are not read as 32-bit ones
+        rounds(cost, good["other"].astype(np.int64), good["valid"], good["order"], good["keys"], good["heads"], h0,
+               out)
+
+
+@search
+def test_spread_lowers_the_destinations_of_reached_sources() -> None:
+    # 0 -> 1 (cost 2), 0 -> 2 (cost 5), 1 -> 2 (cost 1, known infeasible), 2 -> 0 (cost 1)
+    i32 = np.int32
+    cost = np.array([2.0, 5.0, 1.0, 1.0])
+    other, order = np.array([1, 2, 2, 0], dtype=i32), np.array([0, 1, 2, 3], dtype=i32)
+    valid = np.array([0, 1, -1, 0], dtype=np.int8)
+    keys, heads = np.array([0, 1, 2], dtype=i32), np.array([0, 2, 3], dtype=i32)
+    out = np.empty((2, 3))
+    gg._search.spread(cost, other, valid, order, keys, heads, np.array([0.0, np.inf, np.inf]), out)
+    np.testing.assert_array_equal(out, [[0.0, 2.0, 5.0], [0.0, 2.0, 5.0]])
