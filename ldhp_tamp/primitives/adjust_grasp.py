@@ -307,14 +307,15 @@ class IntraEdges:
     src, dst : ndarray of int, shape (E,)
         Grasp indices (0 is {0, 0}).
     sense : ndarray of int, shape (E,)
-        Rotation sense (+1 counter-clockwise, -1 clockwise) of ``pivot`` / ``flip``; 0.
+        Rotation sense (+1 counter-clockwise, -1 clockwise) of ``pivot`` / ``flip``; 0
+        (int8 in proposals).
     finger : ndarray of int, shape (E,)
         The finger (0 or 1) a ``pivot`` turns about, a ``slide`` slides, a ``close``
-        keeps; -1 otherwise.
+        keeps; -1 otherwise (int8 in proposals).
     travel : ndarray, shape (E,)
         Mean path length of the two fingers (mm), :meth:`GripperMotion.travel`.
     switches : ndarray of int, shape (E,)
-        Primitive switches (1 per edge).
+        Primitive switches (1 per edge; in proposals a read-only broadcast of 1).
     motion : GripperMotion or None
         The edges' gripper motions, when built.
     checked : bool
@@ -1145,6 +1146,12 @@ def _ints(x: ArrayLike) -> IntArray:
     return np.asarray(x, dtype=np.int64).reshape(-1)
 
 
+def _small_ints(x: ArrayLike) -> NDArray[np.int8]:
+    """A sense or a finger (|value| <= ROLL_SENSE) per edge, a byte each: a layer proposes
+    hundreds of thousands of edges, and the memory they take is paid in page faults."""
+    return np.asarray(x, dtype=np.int8).reshape(-1)
+
+
 class _AdjustGrasp:
     """Shared machinery. A primitive defines ``_candidates`` (which edges, with their
     closed-form travel) and ``motion`` (their legs); the rest is common."""
@@ -1174,8 +1181,9 @@ class _AdjustGrasp:
         src, dst, sense, finger, travel = self._candidates(context, pose, _as_rows(sources),
                                                            np.asarray(members, dtype=bool))
         n = src.shape[0]
-        return IntraEdges(self.name, _ints(src), _ints(dst), _ints(sense), _ints(finger),
-                          np.asarray(travel, dtype=float).reshape(n), np.ones(n, dtype=np.int64))
+        return IntraEdges(self.name, _ints(src), _ints(dst), _small_ints(sense), _small_ints(finger),
+                          np.asarray(travel, dtype=float).reshape(n),
+                          np.broadcast_to(np.int64(1), (n,)))  # one switch each, read-only, no memory
 
     def check(self, context: AdjustContext, pose: Pose, edges: IntraEdges) -> CheckResult:
         """Check candidate edges at object pose ``pose`` (:func:`check_motion`)."""
