@@ -26,7 +26,7 @@ from geometry.kinematics import SweepEnd, sweep, translate
 from geometry.poses import Pose, transform_points
 from geometry.tolerances import CONTACT_BACKOFF, CONTACT_TOL
 from geometry.world import World
-from ldhp_tamp.parallel import Forked
+from ldhp_tamp.parallel import Forked, Helper
 from ldhp_tamp.primitives.registry import DeclaresActions, PrimitiveRegistry
 
 log = logging.getLogger(__name__)
@@ -238,27 +238,39 @@ def build_context(world: World, start: Pose, goal: Pose, *, transition_witnesses
 
 
 def admissible_transitions(ctx: PlanningContext, domain: DeclaresActions, registry: PrimitiveRegistry,
-                           meanwhile: Callable[[], object] | None = None,
+                           meanwhile: Callable[[], object] | None = None, helper: Helper | None = None,
                            ) -> dict[str, frozenset[tuple[ContactState, ContactState]]]:
     """The registry's transitions for the domain's MoveObject actions, restricted to the
     graph: pairs whose ends are not nodes (a sweep can leave the workspace) and self-loops
     are dropped.
 
-    ``meanwhile``: other work of the solve, done in this process while a forked one
-    (:class:`ldhp_tamp.parallel.Forked`) computes the transitions; that process sends
-    them back with what it added to ``ctx.memo`` (the air-move's carrying grasps), so
-    that this process ends as if it had computed them itself. With one core, ``meanwhile``
-    runs first, then the transitions."""
+    ``meanwhile``: other work of the solve, done in this process while another one
+    computes the transitions: ``helper``, when given, whose state ends with
+    ``(ctx, domain, registry)`` (the solve's helper, forked in the setup with them,
+    :meth:`ldhp_tamp.grasp_graph.GraspPlanner.start_helper`), else a process forked now
+    (:class:`ldhp_tamp.parallel.Forked`). That process sends the transitions back with
+    what it added to ``ctx.memo`` (the air-move's carrying grasps), so that this process
+    ends as if it had computed them itself. With one core, ``meanwhile`` runs first, then
+    the transitions."""
     if meanwhile is None:
         found = registry.admissible_transitions(domain, ctx)
     else:
-        job = Forked(_transitions_and_memo, ctx, domain, registry)
-        try:
-            meanwhile()
-            found, memo = job.result()
-        finally:
-            job.close()
-        for key, value in memo.items():  # what a forked process memoised, as if memoised here
+        if helper is not None:
+            helper.submit(_helper_transitions)
+            try:
+                meanwhile()
+            except BaseException:
+                helper.close()  # its answer is not wanted, and would come first
+                raise
+            found, memo = helper.result()
+        else:
+            job = Forked(_transitions_and_memo, ctx, domain, registry)
+            try:
+                meanwhile()
+                found, memo = job.result()
+            finally:
+                job.close()
+        for key, value in memo.items():  # what another process memoised, as if memoised here
             ctx.memo.setdefault(key, value)
     nodes = ctx.state_set
     out = {name: frozenset((a, b) for a, b in pairs if a != b and a in nodes and b in nodes)
@@ -274,6 +286,13 @@ def _transitions_and_memo(ctx: PlanningContext, domain: DeclaresActions, registr
     before = set(ctx.memo)
     found = registry.admissible_transitions(domain, ctx)
     return found, {key: value for key, value in ctx.memo.items() if key not in before}
+
+
+def _helper_transitions(state: tuple[Any, ...]
+                        ) -> tuple[dict[str, frozenset[tuple[ContactState, ContactState]]], dict[Any, Any]]:
+    """:func:`_transitions_and_memo` in the solve's helper process, whose state ends with
+    the setup's ``(ctx, domain, registry)``."""
+    return _transitions_and_memo(*state[-1])
 
 
 def relevant_states(ctx: PlanningContext, transitions: dict[str, frozenset[tuple[ContactState, ContactState]]]

@@ -567,16 +567,26 @@ class GraspPlanner:
 
     def live_helper(self) -> Helper | None:
         """The helper process if one is running (none is started here); its state is
-        ``(world, grasps, motion options, AdjustGrasp context)``."""
+        ``(world, grasps, motion options, AdjustGrasp context, shared)``
+        (:meth:`start_helper`)."""
         h = self._helper
         return h if h is not None and h.alive else None
 
-    def _helper_process(self) -> Helper | None:
+    def start_helper(self, shared: object = None) -> Helper | None:
+        """Fork the helper process now (none if it is off or the machine has one core),
+        with ``shared`` as the fifth item of its state, after ``(world, grasps, motion
+        options, AdjustGrasp context)``: the solve forks it in its setup, while little is
+        built yet, and has it compute the admissible transitions first
+        (:func:`ldhp_tamp.contact_graph.admissible_transitions`). Call :meth:`prepare`
+        first: a change of grasp set ends the helper. A live helper is kept as it is."""
+        return self._helper_process(shared)
+
+    def _helper_process(self, shared: object = None) -> Helper | None:
         if not self.options.helper or cores() < 2:
             return None
         if self._helper is None or not self._helper.alive:
             try:
-                self._helper = Helper((self.world, self.grasps, self.options.motion, self.context))
+                self._helper = Helper((self.world, self.grasps, self.options.motion, self.context, shared))
             except (OSError, RuntimeError) as exc:  # no fork: one core it is
                 log.debug("no helper process: %s", exc)
                 self._helper = None

@@ -384,48 +384,62 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
                             start_any=scenario.start_grasp_any)
 
     grasp_planner = grasp_planner_of(actions)
+    start_pose = (ctx.start if ctx.start_free else ctx.start_contact.pose).as_array()
 
     def tables() -> None:  # the grasp set of the paths from the start (with the start grasp's row)
-        grasp_planner.prepare((ctx.start if ctx.start_free else ctx.start_contact.pose).as_array())
+        grasp_planner.prepare(start_pose)
         grasp_planner.prepare_tables()
 
     def meanwhile() -> None:
         tables()
         load_domain()
 
-    # The transitions in a forked process (when helpers are on), the grasp graph's tables
-    # (and the domain, if not loaded yet) here meanwhile.
-    transitions = admissible_transitions(ctx, actions, REGISTRY, meanwhile=meanwhile if options.helpers else None)
-    if not options.helpers:
-        tables()
-    domain = load_domain()
-    if _bindings(domain.info) != _bindings(actions):  # not expected: the two readings of the domain differ
-        log.warning("%s: unified-planning reads the actions %s, the validator's reader %s; the setup again "
-                    "with unified-planning's", domain.info.source, _bindings(domain.info), _bindings(actions))
-        actions = domain.info
-        grasp_planner = grasp_planner_of(actions)
-        transitions = admissible_transitions(ctx, actions, REGISTRY)
-        tables()
-    if scenario.start_grasp is not None:  # the grasp the object starts in, for the Step-1 air-move
-        ctx = replace(ctx, grasps=grasp_planner.grasps, start_grasp=int(grasp_planner.start_index))
-    clock.setup = budget.clock() - clock.start
-    budget.check(deadline, "the setup (contact-state graph, admissible transitions)")
-    say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
-        f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
+    # The transitions in the bottom tier's helper process, forked now (when helpers are
+    # on and the machine has a second core), the grasp graph's tables (and the domain, if
+    # not loaded yet) here meanwhile. One fork for the solve, made while the heap is
+    # small: every fork costs this process a page fault for each page it writes after it.
+    helper = None
+    if options.helpers:
+        grasp_planner.prepare(start_pose)
+        helper = grasp_planner.start_helper((ctx, actions, REGISTRY))
+    try:
+        transitions = admissible_transitions(ctx, actions, REGISTRY, meanwhile=meanwhile if options.helpers else None,
+                                             helper=helper)
+        if not options.helpers:
+            tables()
+        domain = load_domain()
+        if _bindings(domain.info) != _bindings(actions):  # not expected: the two readings of the domain differ
+            log.warning("%s: unified-planning reads the actions %s, the validator's reader %s; the setup again "
+                        "with unified-planning's", domain.info.source, _bindings(domain.info), _bindings(actions))
+            actions = domain.info
+            grasp_planner.close()
+            grasp_planner = grasp_planner_of(actions)
+            transitions = admissible_transitions(ctx, actions, REGISTRY)
+            tables()
+        if scenario.start_grasp is not None:  # the grasp the object starts in, for the Step-1 air-move
+            ctx = replace(ctx, grasps=grasp_planner.grasps, start_grasp=int(grasp_planner.start_index))
+        clock.setup = budget.clock() - clock.start
+        budget.check(deadline, "the setup (contact-state graph, admissible transitions)")
+        say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
+            f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 
-    # the streams' sweeps, two at a time, with the bottom tier's helper once it has one
-    ctx = replace(ctx, helper=grasp_planner.live_helper, jobs=None if options.helpers else 1)
-    judge = _Judge(scenario, engine, options.simulate, c, clock, helper=grasp_planner.live_helper)
-    # The transitions a prior rates unlikely to pass the bottom tier: left out of the plans
-    # until no plan is left without them.
-    deferred: set[Transition] = set()
-    if options.prior is not None:
-        every = {t.label: t for a, pairs in transitions.items() for t in (Transition(a, *p) for p in pairs)}
-        deferred = {every[label] for label in options.prior.deferred(every)}
-        c.deferred = len(deferred)
-        if deferred:
-            say(f"the prior defers {len(deferred)} transition(s): "
-                + ", ".join(sorted(t.label for t in deferred)[:5]) + (", ..." if len(deferred) > 5 else ""))
+        # the streams' sweeps, two at a time, with the bottom tier's helper
+        ctx = replace(ctx, helper=grasp_planner.live_helper, jobs=None if options.helpers else 1)
+        judge = _Judge(scenario, engine, options.simulate, c, clock, helper=grasp_planner.live_helper)
+        # The transitions a prior rates unlikely to pass the bottom tier: left out of the plans
+        # until no plan is left without them.
+        deferred: set[Transition] = set()
+        if options.prior is not None:
+            every = {t.label: t for a, pairs in transitions.items() for t in (Transition(a, *p) for p in pairs)}
+            deferred = {every[label] for label in options.prior.deferred(every)}
+            c.deferred = len(deferred)
+            if deferred:
+                say(f"the prior defers {len(deferred)} transition(s): "
+                    + ", ".join(sorted(t.label for t in deferred)[:5]) + (", ..." if len(deferred) > 5 else ""))
+    except BaseException:  # the helper process ends with the setup, if the setup ends the solve
+        with contextlib.suppress(TimeBudgetExceeded):
+            grasp_planner.close()
+        raise
     try:  # the helper process ends with the solve, however it ends
         forbidden: set[Transition | Sequel] = set()
         for iteration in range(1, h_max + 1):

@@ -135,6 +135,49 @@ def test_transitions_beside_other_work_are_the_same(task1_grasps, domain, monkey
         np.testing.assert_array_equal(np.asarray(ctx.memo[key], dtype=object), np.asarray(value, dtype=object))
 
 
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+def test_transitions_in_the_solves_helper_are_the_same(task1_grasps, domain) -> None:
+    """With the solve's helper (forked with the setup's context, domain and registry as
+    the last item of its state), the same pairs and memo as computed here; the helper
+    lives on for the bottom tier's work."""
+    from dataclasses import replace
+
+    from ldhp_tamp.parallel import Helper
+
+    _, base = task1_grasps
+    here = replace(base, memo={})
+    expected = admissible_transitions(here, domain.info, REGISTRY)
+    ctx = replace(base, memo={})
+    helper = Helper((None, None, None, None, (ctx, domain.info, REGISTRY)))
+    try:
+        order = []
+        got = admissible_transitions(ctx, domain.info, REGISTRY, meanwhile=lambda: order.append(len(ctx.memo)),
+                                     helper=helper)
+        assert got == expected and order == [0]
+        assert set(ctx.memo) == set(here.memo) and ctx.memo
+        assert helper.idle  # its answer taken: free for the next call
+    finally:
+        helper.close()
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+def test_a_failure_beside_the_helpers_transitions_ends_the_helper(task1_grasps, domain) -> None:
+    from dataclasses import replace
+
+    from ldhp_tamp.parallel import Helper
+
+    _, base = task1_grasps
+    ctx = replace(base, memo={})
+    helper = Helper((None, None, None, None, (ctx, domain.info, REGISTRY)))
+
+    def fail() -> None:
+        raise KeyError("meanwhile")
+
+    with pytest.raises(KeyError, match="meanwhile"):
+        admissible_transitions(ctx, domain.info, REGISTRY, meanwhile=fail, helper=helper)
+    assert not helper.alive  # closed and reaped: its answer would have come first
+
+
 def test_vertex_on_convex_vertex_states_are_dropped(task2) -> None:
     sc, ctx = task2
     env = sc.world.environment

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -502,6 +503,29 @@ def test_the_domain_is_loaded_while_the_transitions_are_computed(pick_result, mo
     one = solve(load_scenario(PICK), SolveOptions(helpers=False))
     assert events == ["domain", "transitions", "transitions done"]  # without helpers: first, as it was
     assert [w for s in one.plan.steps for w in s.waypoints] == [w for s in pick_result.plan.steps for w in s.waypoints]
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+def test_the_solve_forks_its_helper_once_in_the_setup(pick_result, monkeypatch) -> None:
+    """The transitions are computed by the bottom tier's helper, forked in the setup: the
+    solve forks no other long-lived process (a fork costs the solve a page fault for each
+    page it writes afterwards), and the plan is the same."""
+    from ldhp_tamp import grasp_graph, parallel
+
+    monkeypatch.setattr(parallel, "cores", lambda: 2)
+    monkeypatch.setattr(grasp_graph, "cores", lambda: 2)
+    made = []
+    real = parallel.Helper.__init__
+
+    def init(self, state):
+        made.append(len(state))
+        real(self, state)
+
+    monkeypatch.setattr(parallel.Helper, "__init__", init)
+    monkeypatch.setattr(parallel.Forked, "__init__", lambda *a: pytest.fail("a process forked for the transitions"))
+    res = solve(load_scenario(PICK))
+    assert made == [5]  # (world, grasps, motion options, context, the setup's (ctx, domain, registry))
+    assert [w for s in res.plan.steps for w in s.waypoints] == [w for s in pick_result.plan.steps for w in s.waypoints]
 
 
 def test_a_bad_domain_is_reported_before_a_missing_contact_pose(tmp_path: Path) -> None:
