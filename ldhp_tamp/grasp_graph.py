@@ -502,8 +502,9 @@ class GraspPlanner:
         """Have the AdjustGrasp primitives build what their proposals share at every
         pose of the grasp set (their optional ``prepare``: pivots', slides' and
         closings' tables of pairs), which their first proposals would build otherwise:
-        the solve does it while a forked process computes the setup's transitions, and
-        a helper forked later inherits them. Call :meth:`prepare` first (a change of
+        the solve does it while its helper process computes the setup's transitions
+        (the helper, forked before, needs none: it checks edges and computes grasp
+        sets). Call :meth:`prepare` first (a change of
         grasp set makes a new context)."""
         for prim in self.primitives:
             build = getattr(prim.impl, "prepare", None)

@@ -400,9 +400,12 @@ def test_a_budget_shorter_than_the_setup_fails_in_it(fake_clock: FakeClock, monk
 
 def test_the_admissible_transitions_stop_at_the_deadline(fake_clock: FakeClock, monkeypatch) -> None:
     # 78 contact states: the budget runs out as their transitions are swept, and the
-    # sweeps' own checks (in forked children too) stop them
+    # sweeps' own checks (in forked children too) stop them. The clock moves on as the
+    # setup forks the helper that sweeps them (a forked child has the clock as it was).
+    from ldhp_tamp.grasp_graph import GraspPlanner
+
     sc = load_scenario(UNSOLVABLE / "goal_in_closed_box.toml")
-    advance_on_entry(monkeypatch, tamp, "admissible_transitions", fake_clock, 0.8)
+    advance_on_entry(monkeypatch, GraspPlanner, "start_helper", fake_clock, 0.8)
     result = solve(sc, SolveOptions(timeout=0.8))
     _assert_timed_out(result, 0.8)
     assert result.plan.stats.top_iterations == 0
