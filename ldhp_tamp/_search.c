@@ -53,10 +53,13 @@ indices_ok(const int32_t *other, const int32_t *order, const int32_t *keys, cons
     return 1;
 }
 
+/* Bellman-Ford rounds over the source groups: backward (relax) each source takes its
+   cheapest edge's cost plus the other end's; forward (spread) each reached source lowers
+   its edges' other ends. A branch per group, not per edge. */
 static void
-relax(const double *cost, const int32_t *other, const int8_t *valid, const int32_t *order, const int32_t *keys,
-      const int32_t *heads, Py_ssize_t m, Py_ssize_t E, const double *h0, double *out, Py_ssize_t size,
-      Py_ssize_t rounds)
+rounds_of(const double *cost, const int32_t *other, const int8_t *valid, const int32_t *order, const int32_t *keys,
+          const int32_t *heads, Py_ssize_t m, Py_ssize_t E, const double *h0, double *out, Py_ssize_t size,
+          Py_ssize_t rounds, int forward)
 {
     const double *prev = h0;
     for (Py_ssize_t r = 0; r < rounds; r++) {
@@ -64,44 +67,31 @@ relax(const double *cost, const int32_t *other, const int8_t *valid, const int32
         memcpy(cur, prev, (size_t)size * sizeof(double));
         for (Py_ssize_t i = 0; i < m; i++) {
             Py_ssize_t lo = (Py_ssize_t)heads[i], hi = i + 1 < m ? (Py_ssize_t)heads[i + 1] : E;
-            double best = INFINITY;
-            for (Py_ssize_t j = lo; j < hi; j++) {
-                double h = prev[other[j]];
-                if (h == INFINITY || valid[order[j]] < 0)
-                    continue;
-                double v = cost[j] + h;
-                if (v < best)
-                    best = v;
-            }
             int32_t k = keys[i];
-            if (best < cur[k])
-                cur[k] = best;
-        }
-        prev = cur;
-    }
-}
-
-static void
-spread(const double *cost, const int32_t *other, const int8_t *valid, const int32_t *order, const int32_t *keys,
-       const int32_t *heads, Py_ssize_t m, Py_ssize_t E, const double *h0, double *out, Py_ssize_t size,
-       Py_ssize_t rounds)
-{
-    const double *prev = h0;
-    for (Py_ssize_t r = 0; r < rounds; r++) {
-        double *cur = out + r * size;
-        memcpy(cur, prev, (size_t)size * sizeof(double));
-        for (Py_ssize_t i = 0; i < m; i++) {
-            double h = prev[keys[i]];
-            if (h == INFINITY)
-                continue;
-            Py_ssize_t lo = (Py_ssize_t)heads[i], hi = i + 1 < m ? (Py_ssize_t)heads[i + 1] : E;
-            for (Py_ssize_t j = lo; j < hi; j++) {
-                if (valid[order[j]] < 0)
+            if (forward) {
+                double h = prev[k];
+                if (h == INFINITY)
                     continue;
-                double v = cost[j] + h;
-                int32_t d = other[j];
-                if (v < cur[d])
-                    cur[d] = v;
+                for (Py_ssize_t j = lo; j < hi; j++) {
+                    if (valid[order[j]] < 0)
+                        continue;
+                    double v = cost[j] + h;
+                    int32_t d = other[j];
+                    if (v < cur[d])
+                        cur[d] = v;
+                }
+            } else {
+                double best = INFINITY;
+                for (Py_ssize_t j = lo; j < hi; j++) {
+                    double h = prev[other[j]];
+                    if (h == INFINITY || valid[order[j]] < 0)
+                        continue;
+                    double v = cost[j] + h;
+                    if (v < best)
+                        best = v;
+                }
+                if (best < cur[k])
+                    cur[k] = best;
             }
         }
         prev = cur;
@@ -136,12 +126,9 @@ check(Py_buffer *b, Py_ssize_t itemsize, Py_ssize_t count, const char *name, con
     return 1;
 }
 
-typedef void (*pass_fn)(const double *, const int32_t *, const int8_t *, const int32_t *, const int32_t *,
-                        const int32_t *, Py_ssize_t, Py_ssize_t, const double *, double *, Py_ssize_t, Py_ssize_t);
-
 /* relax() and spread() take the same arguments */
 static PyObject *
-rounds_py(PyObject *args, const char *name, pass_fn fn)
+rounds_py(PyObject *args, const char *name, int forward)
 {
     Py_buffer cost, other, valid, order, keys, heads, h0, out;
     if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*w*", &cost, &other, &valid, &order, &keys, &heads, &h0, &out))
@@ -164,7 +151,8 @@ rounds_py(PyObject *args, const char *name, pass_fn fn)
     Py_BEGIN_ALLOW_THREADS
     ok = indices_ok(other.buf, order.buf, keys.buf, heads.buf, m, E, size);
     if (ok)
-        fn(cost.buf, other.buf, valid.buf, order.buf, keys.buf, heads.buf, m, E, h0.buf, out.buf, size, rounds);
+        rounds_of(cost.buf, other.buf, valid.buf, order.buf, keys.buf, heads.buf, m, E, h0.buf, out.buf, size, rounds,
+                  forward);
     Py_END_ALLOW_THREADS
     if (!ok) {
         PyErr_Format(PyExc_ValueError, "%s: an index outside its array (other, order, keys or heads)", name);
@@ -180,13 +168,13 @@ done:
 static PyObject *
 relax_py(PyObject *Py_UNUSED(self), PyObject *args)
 {
-    return rounds_py(args, "relax", relax);
+    return rounds_py(args, "relax", 0);
 }
 
 static PyObject *
 spread_py(PyObject *Py_UNUSED(self), PyObject *args)
 {
-    return rounds_py(args, "spread", spread);
+    return rounds_py(args, "spread", 1);
 }
 
 static PyObject *
