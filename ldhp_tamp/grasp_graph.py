@@ -146,8 +146,10 @@ class GraspGraphOptions:
         On a machine with more than one core, share the work with a helper process forked
         with the grasp set (:class:`ldhp_tamp.parallel.Helper`): the next uncached G_T and
         G_m while this process computes the current one, half of a LazySP round's larger
-        edge checks, and (through :meth:`GraspPlanner.live_helper`) the streams' sweeps;
-        the same results either way. :meth:`GraspPlanner.close` ends it.
+        edge checks, and (through :meth:`GraspPlanner.live_helper`) the streams' sweeps
+        and, when the solve forks it in its setup (:meth:`GraspPlanner.start_helper`),
+        the admissible transitions; the same results either way.
+        :meth:`GraspPlanner.close` ends it.
     """
 
     adjust: AdjustGraspOptions = AdjustGraspOptions()
