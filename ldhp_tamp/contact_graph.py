@@ -257,19 +257,16 @@ def admissible_transitions(ctx: PlanningContext, domain: DeclaresActions, regist
     else:
         if helper is not None:
             helper.submit(_helper_transitions)
-            try:
-                meanwhile()
-            except BaseException:
-                helper.close()  # its answer is not wanted, and would come first
-                raise
-            found, memo = helper.result()
+            take, drop = helper.result, helper.close
         else:
             job = Forked(_transitions_and_memo, ctx, domain, registry)
-            try:
-                meanwhile()
-                found, memo = job.result()
-            finally:
-                job.close()
+            take, drop = job.result, job.close
+        try:
+            meanwhile()
+        except BaseException:
+            drop()  # the answer is not wanted (a helper's would come before its next one)
+            raise
+        found, memo = take()  # (interrupted, either ends its process)
         for key, value in memo.items():  # what another process memoised, as if memoised here
             ctx.memo.setdefault(key, value)
     nodes = ctx.state_set

@@ -1232,7 +1232,7 @@ class _LayerGraph:
     @staticmethod
     def of(cands: Sequence[_Cands], size: int) -> "_LayerGraph":
         counts = [len(c.edges) for c in cands]
-        offsets = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)]).astype(np.int64)
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         if not sum(counts):
             none = np.zeros(0, dtype=np.int32)
             return _LayerGraph(tuple(cands), size, offsets, none, np.zeros(size + 1, dtype=np.int32), none,
@@ -1252,10 +1252,11 @@ class _LayerGraph:
     def valid(self, prim: int, index: int) -> int:
         return int(self.cands[prim].valid[index])
 
-    def edge(self, index: int) -> tuple[int, int]:
-        """(primitive, candidate) of the edge of index ``index``."""
-        prim = int(np.searchsorted(self.offsets, index, side="right")) - 1
-        return prim, int(index - self.offsets[prim])
+    def edges(self, index: IntArray) -> tuple[IntArray, IntArray]:
+        """(primitive, candidate) of each edge of the indices ``index``."""
+        index = np.asarray(index, dtype=np.int64)
+        prim = np.searchsorted(self.offsets, index, side="right") - 1
+        return prim, index - self.offsets[prim]
 
     @functools.cached_property
     def src(self) -> IntArray:
@@ -1419,7 +1420,8 @@ def _extract(layers: list[_Layer], inter: list[FloatArray], lg: list[_LayerGraph
         g = int(lay.dst[at])
         r -= 1
         nodes.append((k, g))
-        edges.append((k, *lay.edge(int(lay.order[at]))))
+        prim, cand = lay.edges(lay.order[at])
+        edges.append((k, int(prim), int(cand)))
 
 
 def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[FloatArray]], best: float,
@@ -1443,9 +1445,7 @@ def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[F
         if sel.size:
             index = lay.order[sel]
             by_index = np.argsort(index)  # the candidates' order, in which ties are broken
-            index = index[by_index].astype(np.int64)
-            prim = np.searchsorted(lay.offsets, index, side="right") - 1
-            rows.append((f[sel][by_index], np.full(sel.size, k), prim, index - lay.offsets[prim]))
+            rows.append((f[sel][by_index], np.full(sel.size, k), *lay.edges(index[by_index])))
     if rows:
         f, ks, ps, ix = (np.concatenate(x) for x in zip(*rows))
         for j in np.argsort(f, kind="stable"):
