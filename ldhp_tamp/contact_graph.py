@@ -112,12 +112,16 @@ class PlanningContext:
     """Results the streams may compute again for the same input within one solve (a
     stream's sweeps: the top-tier iterations share their first steps), keyed by it."""
     helper: Any = field(default=None, repr=False)
-    """``None``, or a function returning a live :class:`ldhp_tamp.parallel.Helper` whose
-    state starts with the world (or ``None``): the streams' sweeps may run there."""
+    """``None``, or the bottom tier's
+    :meth:`~ldhp_tamp.grasp_graph.GraspPlanner.live_helper`: a function returning its
+    live :class:`ldhp_tamp.parallel.Helper` (or ``None``), whose state starts with the
+    world, the streams' sweeps may run there; given a grasp set, only a helper whose
+    state holds that set and ends with the setup's ``(context, domain, registry)``, the
+    lift-off poses' carriers may run there."""
     jobs: int | None = None
-    """Processes the streams' independent work may be shared by (the lift-off poses,
-    :func:`ldhp_tamp.parallel.fork_map`): ``None``, the machine's cores; 1 keeps it in
-    this process (a solve without helpers)."""
+    """Processes the streams' independent work may be shared by without a live
+    :attr:`helper` (the lift-off poses, :func:`ldhp_tamp.parallel.fork_map`): ``None``,
+    the machine's cores; 1 keeps it in this process (a solve without helpers)."""
 
     @property
     def start_free(self) -> bool:

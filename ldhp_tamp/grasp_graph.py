@@ -471,6 +471,9 @@ class GraspPlanner:
         # a layer's candidate edges, all primitives together (keyed by the _Cands objects)
         self._layer_graphs: OrderedDict[tuple[_Cands, ...], _LayerGraph] = OrderedDict()
         self._helper: Helper | None = None
+        self._helper_grasps: GraspSet | None = None  # the grasp set in the helper's state
+        self._helper_shared: object = None  # and its last item
+        self._shared: object = None  # the last item of every helper forked from now (start_helper)
         self._force_bounded: set[tuple[str, bytes]] = set()  # segments whose G_m is force-bounded
 
     # ---- sets ------------------------------------------------------------------------
@@ -568,28 +571,36 @@ class GraspPlanner:
             self._helper.close()
             self._helper = None
 
-    def live_helper(self) -> Helper | None:
+    def live_helper(self, grasps: GraspSet | None = None) -> Helper | None:
         """The helper process if one is running (none is started here); its state is
         ``(world, grasps, motion options, AdjustGrasp context, shared)``
-        (:meth:`start_helper`)."""
+        (:meth:`start_helper`). With ``grasps``: only if that grasp set (this very object)
+        is the one in its state and the solve gave it ``shared``."""
         h = self._helper
-        return h if h is not None and h.alive else None
+        if h is None or not h.alive:
+            return None
+        if grasps is not None and (self._helper_grasps is not grasps or self._helper_shared is None):
+            return None
+        return h
 
     def start_helper(self, shared: object = None) -> Helper | None:
         """Fork the helper process now (none if it is off or the machine has one core),
         with ``shared`` as the fifth item of its state, after ``(world, grasps, motion
-        options, AdjustGrasp context)``: the solve forks it in its setup, while little is
-        built yet, and has it compute the admissible transitions first
-        (:func:`ldhp_tamp.contact_graph.admissible_transitions`). Call :meth:`prepare`
-        first: a change of grasp set ends the helper. A live helper is kept as it is."""
-        return self._helper_process(shared)
+        options, AdjustGrasp context)``, and of every helper forked after it (a change of
+        grasp set ends a helper; the next use forks another): the solve forks it in its
+        setup, while little is built yet, and has it compute the admissible transitions
+        first (:func:`ldhp_tamp.contact_graph.admissible_transitions`). Call
+        :meth:`prepare` first. A live helper is kept as it is."""
+        self._shared = shared
+        return self._helper_process()
 
-    def _helper_process(self, shared: object = None) -> Helper | None:
+    def _helper_process(self) -> Helper | None:
         if not self.options.helper or cores() < 2:
             return None
         if self._helper is None or not self._helper.alive:
             try:
-                self._helper = Helper((self.world, self.grasps, self.options.motion, self.context, shared))
+                self._helper = Helper((self.world, self.grasps, self.options.motion, self.context, self._shared))
+                self._helper_grasps, self._helper_shared = self.grasps, self._shared
             except (OSError, RuntimeError) as exc:  # no fork: one core it is
                 log.debug("no helper process: %s", exc)
                 self._helper = None

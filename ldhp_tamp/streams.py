@@ -14,11 +14,12 @@ recorded, so the TAMP loop can turn them into constraints of the symbolic tier.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections import Counter
 from dataclasses import dataclass, field, replace
-from typing import Iterator, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
@@ -437,14 +438,23 @@ class PathSearch:
 
 #: Grid step (mm of vertex motion) of the lift-off poses looked at along a motion before a lift.
 LIFT_OFF_STEP_MM = 10.0
-#: Lift-off poses per core from which they are shared with the other cores (a pose's
-#: carriers take a few milliseconds, a fork about ten).
+#: Lift-off poses per core from which they are shared with the other cores by forking (a
+#: pose's carriers take a few milliseconds, a fork about ten). With the bottom tier's
+#: helper process alive they are shared from two poses on: it is forked already.
 LIFT_OFF_FORK_MIN = 6
 
 
 def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) -> list[tuple[float, int]]:
     """``(parameter, carriers)`` along ``seg``'s motion where it stays in ``state``, on the
-    grid of :meth:`PathSearch._lift_offs`, for the values with a carrier."""
+    grid of :meth:`PathSearch._lift_offs`, for the values with a carrier.
+
+    The poses are independent: with a live helper process whose state holds this grasp
+    set (``ctx.helper(ctx.grasps)``, idle), every second one is computed there meanwhile
+    (:func:`_helper_carrier_counts`); else the
+    machine's cores take them one at a time (:func:`ldhp_tamp.parallel.fork_map`, from
+    ``LIFT_OFF_FORK_MIN`` poses a core). A fork costs this process a page fault for each
+    page it writes afterwards (``docs/benchmarks.md``, "page faults"): the helper, forked
+    in the setup, spares the solve that second fork."""
     motion = seg.motion
     s_max = ctx.reach if motion.kind is MotionKind.TRANSLATE else math.pi
     sw = sweep(ctx.world, motion, s_max)
@@ -458,14 +468,40 @@ def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) ->
     if n < 1:
         return []
     values = np.linspace(a + margin, b - margin, n + 1)
-
-    def count(pose: np.ndarray) -> int:
-        found = carriers(ctx, Pose.from_array(pose))
-        return 0 if found is None else int(found.size)
-
-    # the poses are independent: the machine's cores take them one at a time
-    counts = fork_map(count, list(motion.poses(values)), ctx.jobs, min_items_per_core=LIFT_OFF_FORK_MIN)
+    poses = list(motion.poses(values))
+    helper = ctx.helper(ctx.grasps) if ctx.helper is not None else None
+    if helper is not None and helper.idle and len(poses) >= 2:
+        helper.submit(_helper_carrier_counts, poses[1::2])
+        try:
+            mine = [_carrier_count(ctx, p) for p in poses[0::2]]
+        finally:  # (interrupted, the helper's result closes it)
+            theirs = helper.result()
+        counts = [0] * len(poses)
+        counts[0::2], counts[1::2] = mine, theirs
+    else:
+        counts = fork_map(functools.partial(_carrier_count, ctx), poses, ctx.jobs,
+                          min_items_per_core=LIFT_OFF_FORK_MIN)
     return [(float(value), c) for value, c in zip(values, counts) if c]
+
+
+def _carrier_count(ctx: PlanningContext, pose: np.ndarray) -> int:
+    """How many grasps lift the object off at ``pose`` and carry it to the goal's
+    orientation (:func:`ldhp_tamp.primitives.move_object.carriers`)."""
+    found = carriers(ctx, Pose.from_array(pose))
+    return 0 if found is None else int(found.size)
+
+
+def _helper_carrier_counts(state: tuple[Any, ...], poses: list[np.ndarray]) -> list[int]:
+    """:func:`_carrier_count` of each pose in the solve's helper process. Its state
+    (:meth:`ldhp_tamp.grasp_graph.GraspPlanner.start_helper`, forked in the setup of
+    :func:`ldhp_tamp.tamp.solve`) is ``(world, grasps, motion options, AdjustGrasp
+    context, (ctx, domain, registry))``: the setup's context, with the grasp set of the
+    helper's state, which is the streams' (:func:`_lift_off_values` asks for a helper
+    whose state holds the streams' grasp set: the enumerated set, or with the start
+    grasp's row). ``ctx.memo`` is the helper's own: what it memoises (air holders per
+    orientation, pure functions of the grasp set) stays there, as a forked child's did."""
+    ctx = replace(state[-1][0], grasps=state[1])
+    return [_carrier_count(ctx, p) for p in poses]
 
 
 @dataclass(eq=False)

@@ -273,6 +273,46 @@ def test_lift_off_values_are_the_same_on_the_cores(task1_grasps, domain, monkeyp
     assert shared == alone and len(alone) >= 3
 
 
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+def test_lift_off_values_are_the_same_with_the_solves_helper(task1_grasps, domain, monkeypatch) -> None:
+    """With the solve's helper alive (its state as the solve forks it: the grasp set the
+    bottom tier indexes second, the setup's context, domain and registry last), every
+    second lift-off pose is computed there: the same values and counts, in the same
+    order, as this process alone, no process forked for them, and the helper free
+    afterwards."""
+    from dataclasses import replace
+
+    from ldhp_tamp import parallel, streams
+    from ldhp_tamp.parallel import Helper
+
+    _, base = task1_grasps
+    plan = [Transition("tip", S("l1-e1"), S("v2-e1")), Transition("air-move", S("v2-e1"), FREE)]
+    path = next(iter(pose_paths(replace(base, memo={}), plan, domain.info, REGISTRY, np.random.default_rng(0),
+                                StreamStats())))
+    tip = path.segments[0]
+    alone = streams._lift_off_values(replace(base, memo={}, jobs=1), tip, S("v2-e1"))
+    setup = replace(base, memo={}, grasps=None)  # the helper's carriers take the grasp set from its state
+    helper = Helper((None, base.grasps, None, None, (setup, domain.info, REGISTRY)))
+    try:
+        def no_fork(*args: object, **kwargs: object) -> None:
+            raise AssertionError("forked for the lift-off poses beside a live helper")
+
+        monkeypatch.setattr(parallel, "cores", lambda: 2)
+        monkeypatch.setattr(streams, "fork_map", no_fork)
+        asked = []
+
+        def live(grasps=None):
+            asked.append(grasps)
+            return helper
+
+        shared = streams._lift_off_values(replace(base, memo={}, helper=live), tip, S("v2-e1"))
+        assert asked == [base.grasps]  # a helper with the streams' grasp set
+        assert shared == alone and len(alone) >= 3
+        assert helper.idle
+    finally:
+        helper.close()
+
+
 def test_task1_tip_stream_offers_an_overshoot_aligned_back(task1, domain) -> None:
     """Among the first three tip samples is one past the goal's 60 degrees (halfway from
     the goal value to the end of the v2-e1 interval, ~74.6 degrees), aligned back by an

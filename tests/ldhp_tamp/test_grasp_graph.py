@@ -391,6 +391,44 @@ def test_the_helper_process_changes_no_grasp_plan_and_ends_with_close():
     assert out[True] == out[False]
 
 
+def test_a_helper_asked_for_by_grasp_set_holds_that_set_and_the_shared_state(monkeypatch) -> None:
+    """``live_helper(grasps)``: the helper only if its state holds that very grasp set
+    and the solve's shared state (``start_helper``), which every helper forked later
+    holds too (a change of grasp set ends a helper; the next use forks another)."""
+    import dataclasses
+    import os
+
+    from ldhp_tamp import grasp_graph
+
+    if not hasattr(os, "fork"):
+        pytest.skip("no os.fork on this platform")
+    monkeypatch.setattr(grasp_graph, "cores", lambda: 2)
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "inv_place_release.toml")
+    assert sc.start_grasp is not None  # the start grasp's row depends on the start pose
+    opts = dataclasses.replace(GraspGraphOptions(), helper=True)
+    planner = GraspPlanner(sc.world, enumerate_grasps(sc.world, GraspOptions(samples_per_edge=10)), bindings(),
+                           sc.start_grasp, sc.goal_release, opts)
+    try:
+        start = sc.start.as_array()
+        planner.prepare(start)
+        grasps = planner.grasps
+        assert planner._helper_process() is not None  # forked without shared state
+        assert planner.live_helper() is not None and planner.live_helper(grasps) is None
+        planner.close()
+        shared = ("setup context", "domain", "registry")
+        helper = planner.start_helper(shared)
+        assert helper is not None and planner.live_helper(grasps) is helper
+        assert planner.live_helper(dataclasses.replace(grasps)) is None  # an equal set, not this one
+        moved = start + np.array([5.0, 0.0, 0.0])
+        planner.prepare(moved)  # the start grasp's row moves with the start pose: another grasp set
+        assert planner.grasps is not grasps and planner.live_helper() is None
+        again = planner._helper_process()
+        assert again is not None and again is not helper
+        assert planner.live_helper(planner.grasps) is again and planner.live_helper(grasps) is None
+    finally:
+        planner.close()
+
+
 def test_a_force_limit_the_judge_met_leaves_a_segments_set_at_once(pick: Scenario, pick_grasps) -> None:
     """G_m bounds no force; after a plan broke the gripper's force limit along a segment,
     ``bound_forces`` takes out of that segment's G_m every grasp that needs more (a pinch
