@@ -31,12 +31,16 @@ figures (2 when a worker fails: its error is printed).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import statistics
 import subprocess
 import sys
+import tempfile
+from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 TIERS = ("setup", "symbolic", "streams", "grasp_graph")
 
@@ -71,42 +75,62 @@ for line in sys.stdin:
 """
 
 
-def _worker(tree: Path, scenario: Path, prior: Path | None) -> subprocess.Popen[str]:
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    return subprocess.Popen([sys.executable, "-c", WORKER, str(scenario), str(prior or "")], cwd=tree, env=env,
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+@dataclass
+class _Worker:
+    """A worker process on one tree's code; its messages go to a file (a pipe nobody reads
+    while it solves could fill up and stop it), read back when it fails."""
 
+    name: str
+    proc: subprocess.Popen[str]
+    log: IO[str]
 
-def _solve(worker: subprocess.Popen[str], seed: int, name: str) -> dict[str, object]:
-    assert worker.stdin is not None and worker.stdout is not None
-    worker.stdin.write(f"{seed}\n")
-    worker.stdin.flush()
-    line = worker.stdout.readline()
-    if not line.strip():
-        worker.kill()
-        err = worker.stderr.read() if worker.stderr is not None else ""
-        raise RuntimeError(f"the worker of {name} failed at seed {seed}:\n{err.strip()}")
-    return json.loads(line)
+    @classmethod
+    def start(cls, name: str, tree: Path, scenario: Path, prior: Path | None) -> "_Worker":
+        log = tempfile.TemporaryFile(mode="w+")
+        proc = subprocess.Popen([sys.executable, "-c", WORKER, str(scenario), str(prior or "")], cwd=tree,
+                                env=dict(os.environ, PYTHONPATH=str(tree)), stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=log, text=True)
+        return cls(name, proc, log)
+
+    def solve(self, seed: int) -> dict[str, object]:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        try:
+            self.proc.stdin.write(f"{seed}\n")
+            self.proc.stdin.flush()
+            line = self.proc.stdout.readline()
+        except BrokenPipeError:
+            line = ""
+        if not line.strip():
+            self.proc.kill()
+            self.proc.wait()
+            self.log.seek(0)
+            raise RuntimeError(f"the worker of {self.name} failed at seed {seed}:\n{self.log.read().strip()}")
+        return json.loads(line)
+
+    def stop(self) -> None:
+        if self.proc.stdin is not None:
+            with contextlib.suppress(BrokenPipeError):
+                self.proc.stdin.close()
+        self.proc.wait()
+        self.log.close()
 
 
 def paired(a: Path, b: Path, scenario: Path, seeds: int, reps: int, prior: Path | None = None
            ) -> dict[str, list[dict[str, object]]]:
     """The solves of both trees, in pairs: ``{"a": [...], "b": [...]}``, the same seed at
     the same index (``reps`` rounds of seeds 0 .. seeds - 1)."""
-    workers = {"a": _worker(a, scenario, prior), "b": _worker(b, scenario, prior)}
+    workers = {"a": _Worker.start("a", a, scenario, prior), "b": _Worker.start("b", b, scenario, prior)}
     out: dict[str, list[dict[str, object]]] = {"a": [], "b": []}
     try:
         i = 0
         for _ in range(reps):
             for seed in range(seeds):
                 for name in ("a", "b") if i % 2 == 0 else ("b", "a"):
-                    out[name].append(_solve(workers[name], seed, name))
+                    out[name].append(workers[name].solve(seed))
                 i += 1
     finally:
         for w in workers.values():
-            if w.stdin is not None:
-                w.stdin.close()
-            w.wait()
+            w.stop()
     return out
 
 
@@ -143,6 +167,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reps", type=int, default=3, help="rounds over the seeds (default 3)")
     ap.add_argument("--prior", type=Path, default=None, help="a transition prior for both (ldhp-tamp prior)")
     args = ap.parse_args(argv)
+    for flag, tree in (("--a", args.a), ("--b", args.b)):
+        if not (tree / "ldhp_tamp" / "tamp.py").is_file():
+            print(f"paired.py: {flag} {tree}: not a checkout of ldhp-tamp (no ldhp_tamp/tamp.py there)",
+                  file=sys.stderr)
+            return 2
+    if not args.scenario.is_file():
+        print(f"paired.py: {args.scenario}: no such scenario file", file=sys.stderr)
+        return 2
     try:
         res = paired(args.a.resolve(), args.b.resolve(), args.scenario.resolve(), args.seeds, args.reps,
                      args.prior.resolve() if args.prior else None)

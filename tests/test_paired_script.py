@@ -2,16 +2,15 @@
 pick example: a few solves of a fraction of a second), the report, and a worker that
 fails (exit 2, its error shown).
 
-The script is not a module of the package: it is imported by path.
+The script is not a module of the package: it is run by path (runpy).
 """
 
 from __future__ import annotations
 
-import importlib.util
 import os
-import sys
+import runpy
 from pathlib import Path
-from types import ModuleType
+from types import SimpleNamespace
 
 import pytest
 
@@ -20,16 +19,7 @@ SCRIPT = REPO / "benchmarks" / "paired.py"
 PICK = REPO / "scenarios" / "example_pick.toml"
 
 
-def _load() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("ldhp_paired_script", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-paired = _load()
+paired = SimpleNamespace(**runpy.run_path(str(SCRIPT), run_name="ldhp_paired_script"))
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="the workers fork a child per solve")
@@ -52,7 +42,15 @@ def test_the_report_says_when_outcomes_differ() -> None:
 
 
 def test_a_failing_worker_is_reported(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    bad = tmp_path / "missing.toml"
+    bad = tmp_path / "bad.toml"
+    bad.write_text("this is not a scenario\n")
     assert paired.main([str(bad), "--a", str(REPO), "--b", str(REPO), "--seeds", "1", "--reps", "1"]) == 2
     err = capsys.readouterr().err
-    assert "the worker of a failed at seed 0" in err and "missing.toml" in err
+    assert "the worker of a failed at seed 0" in err and "bad.toml" in err
+
+
+def test_bad_arguments_are_refused_before_any_worker(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert paired.main([str(PICK), "--a", str(tmp_path), "--b", str(REPO)]) == 2
+    assert "--a" in capsys.readouterr().err
+    assert paired.main([str(tmp_path / "missing.toml"), "--a", str(REPO), "--b", str(REPO)]) == 2
+    assert "missing.toml: no such scenario file" in capsys.readouterr().err
