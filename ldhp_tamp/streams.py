@@ -450,11 +450,11 @@ def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) ->
 
     The poses are independent: with a live helper process whose state holds this grasp
     set (``ctx.helper(ctx.grasps)``, idle), every second one is computed there meanwhile
-    (:func:`_helper_carrier_counts`); else the
-    machine's cores take them one at a time (:func:`ldhp_tamp.parallel.fork_map`, from
-    ``LIFT_OFF_FORK_MIN`` poses a core). A fork costs this process a page fault for each
-    page it writes afterwards (``docs/benchmarks.md``, "page faults"): the helper, forked
-    in the setup, spares the solve that second fork."""
+    (:func:`_helper_carrier_counts`); else the machine's cores take them one at a time
+    (:func:`ldhp_tamp.parallel.fork_map`, from ``LIFT_OFF_FORK_MIN`` poses a core). A fork
+    costs this process a page fault for each page it writes afterwards
+    (``docs/benchmarks.md``, "page faults"): the helper, forked in the setup, spares the
+    solve that second fork."""
     motion = seg.motion
     s_max = ctx.reach if motion.kind is MotionKind.TRANSLATE else math.pi
     sw = sweep(ctx.world, motion, s_max)
