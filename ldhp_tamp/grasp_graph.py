@@ -1146,10 +1146,11 @@ class GraspPlanner:
         poses = _dense_for_gripper(ctx, seg, g)
         grip = compose_batch(poses, gs.gripper[g][None])
         touch = gs.touching[g]
+        contact = np.nan_to_num(gs.contact[g])
         wps = []
         for j in range(poses.shape[0]):
             obj = Pose(float(poses[j, 0]), float(poses[j, 1]), float(poses[j, 2]))
-            pts = obj.apply(np.nan_to_num(gs.contact[g]))
+            pts = obj.apply(contact)
             fc = tuple((float(pts[m, 0]), float(pts[m, 1])) if touch[m] else None for m in range(2))
             wps.append(Waypoint(obj, Pose(float(grip[j, 0]), float(grip[j, 1]), float(grip[j, 2])),
                                 float(gs.width[g]), fc))  # type: ignore[arg-type]
