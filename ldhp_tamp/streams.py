@@ -29,7 +29,7 @@ from geometry.poses import Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL
 from ldhp_tamp import budget
 from ldhp_tamp.contact_graph import PlanningContext
-from ldhp_tamp.parallel import fork_map
+from ldhp_tamp.parallel import fork_map, two_at_a_time
 from ldhp_tamp.path import Segment
 from ldhp_tamp.primitives.move_object import MARGIN_MM, carriers
 from ldhp_tamp.primitives.registry import DomainInfo, Family, PrimitiveRegistry, Transition
@@ -450,11 +450,11 @@ def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) ->
 
     The poses are independent: with a live helper process whose state holds this grasp
     set (``ctx.helper(ctx.grasps)``, idle), every second one is computed there meanwhile
-    (:func:`_helper_carrier_counts`); else the machine's cores take them one at a time
-    (:func:`ldhp_tamp.parallel.fork_map`, from ``LIFT_OFF_FORK_MIN`` poses a core). A fork
-    costs this process a page fault for each page it writes afterwards
-    (``docs/benchmarks.md``, "page faults"): the helper, forked in the setup, spares the
-    solve that second fork."""
+    (:func:`ldhp_tamp.parallel.two_at_a_time`, :func:`_helper_carrier_count`); else the
+    machine's cores take them one at a time (:func:`ldhp_tamp.parallel.fork_map`, from
+    ``LIFT_OFF_FORK_MIN`` poses a core). A fork costs this process a page fault for each
+    page it writes afterwards (``docs/benchmarks.md``, "page faults"): the helper, forked
+    in the setup, spares the solve that second fork."""
     motion = seg.motion
     s_max = ctx.reach if motion.kind is MotionKind.TRANSLATE else math.pi
     sw = sweep(ctx.world, motion, s_max)
@@ -469,18 +469,12 @@ def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) ->
         return []
     values = np.linspace(a + margin, b - margin, n + 1)
     poses = list(motion.poses(values))
+    count = functools.partial(_carrier_count, ctx)
     helper = ctx.helper(ctx.grasps) if ctx.helper is not None else None
-    if helper is not None and helper.idle and len(poses) >= 2:
-        helper.submit(_helper_carrier_counts, poses[1::2])
-        try:
-            mine = [_carrier_count(ctx, p) for p in poses[0::2]]
-        finally:  # (interrupted, the helper's result closes it)
-            theirs = helper.result()
-        counts = [0] * len(poses)
-        counts[0::2], counts[1::2] = mine, theirs
+    if helper is not None and helper.idle:
+        counts = two_at_a_time(helper, poses, count, lambda pose: (_helper_carrier_count, (pose,)))
     else:
-        counts = fork_map(functools.partial(_carrier_count, ctx), poses, ctx.jobs,
-                          min_items_per_core=LIFT_OFF_FORK_MIN)
+        counts = fork_map(count, poses, ctx.jobs, min_items_per_core=LIFT_OFF_FORK_MIN)
     return [(float(value), c) for value, c in zip(values, counts) if c]
 
 
@@ -491,8 +485,8 @@ def _carrier_count(ctx: PlanningContext, pose: np.ndarray) -> int:
     return 0 if found is None else int(found.size)
 
 
-def _helper_carrier_counts(state: tuple[Any, ...], poses: list[np.ndarray]) -> list[int]:
-    """:func:`_carrier_count` of each pose in the solve's helper process. Its state
+def _helper_carrier_count(state: tuple[Any, ...], pose: np.ndarray) -> int:
+    """:func:`_carrier_count` in the solve's helper process. Its state
     (:meth:`ldhp_tamp.grasp_graph.GraspPlanner.start_helper`, forked in the setup of
     :func:`ldhp_tamp.tamp.solve`) is ``(world, grasps, motion options, AdjustGrasp
     context, (ctx, domain, registry))``: the setup's context, with the grasp set of the
@@ -500,8 +494,7 @@ def _helper_carrier_counts(state: tuple[Any, ...], poses: list[np.ndarray]) -> l
     whose state holds the streams' grasp set: the enumerated set, or with the start
     grasp's row). ``ctx.memo`` is the helper's own: what it memoises (air holders per
     orientation, pure functions of the grasp set) stays there, as a forked child's did."""
-    ctx = replace(state[-1][0], grasps=state[1])
-    return [_carrier_count(ctx, p) for p in poses]
+    return _carrier_count(replace(state[-1][0], grasps=state[1]), pose)
 
 
 @dataclass(eq=False)
