@@ -246,6 +246,34 @@ def test_a_helper_runs_calls_with_the_state_it_was_forked_with() -> None:
         h.submit(_add, 1)
 
 
+def _add_where(state, x):
+    return state["base"] + x, os.getpid()
+
+
+@needs_fork
+def test_two_at_a_time_gives_every_second_item_to_the_helper_in_order() -> None:
+    from ldhp_tamp.parallel import Helper, two_at_a_time
+
+    here = lambda x: (40 + x, os.getpid())  # noqa: E731
+    there = lambda x: (_add_where, (x,))  # noqa: E731
+    assert two_at_a_time(None, [1, 2, 3], here, there) == [(41, os.getpid()), (42, os.getpid()), (43, os.getpid())]
+    h = Helper({"base": 40})
+    try:
+        got = two_at_a_time(h, list(range(7)), here, there)
+        assert [v for v, _ in got] == [40 + x for x in range(7)]
+        assert all((pid == os.getpid()) == (i % 2 == 0) for i, (_, pid) in enumerate(got))
+        assert h.idle
+        assert two_at_a_time(h, [5], here, there) == [(45, os.getpid())]  # one item: here
+
+        def fail(x):
+            raise KeyError(x)
+        with pytest.raises(KeyError):
+            two_at_a_time(h, [1, 2], fail, there)
+        assert not h.alive  # its answer not wanted: closed, not waited for
+    finally:
+        h.close()
+
+
 # ---- Forked ---------------------------------------------------------------------------
 
 
