@@ -607,7 +607,7 @@ class GraspPlanner:
         return self._helper
 
     def _pose_sets_paired(self, poses: Sequence[FloatArray]) -> None:
-        """G_T of the poses not cached yet, two at a time with the helper process."""
+        """G_T of the poses not cached yet, every second one in the helper process."""
         todo = list({p.tobytes(): p for p in poses if p.tobytes() not in self._pose_sets}.values())
         if len(todo) < 2:
             return

@@ -423,7 +423,7 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
         say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
             f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 
-        # the streams' sweeps, two at a time, with the bottom tier's helper
+        # the streams' sweeps and lift-off poses, half of them in the bottom tier's helper
         ctx = replace(ctx, helper=grasp_planner.live_helper, jobs=None if options.helpers else 1)
         judge = _Judge(scenario, engine, options.simulate, c, clock, helper=grasp_planner.live_helper)
         # The transitions a prior rates unlikely to pass the bottom tier: left out of the plans

@@ -294,9 +294,9 @@ class _Swept:
 
 def _stream_sweeps(ctx: PlanningContext, jobs: list[tuple[Motion, float]]) -> list[Sweep]:
     """The streams' sweep of each (motion, s_max): memoised for the solve (a pure
-    function of them; the top-tier iterations share their first steps), two at a time
-    when the context offers a live helper process (``ctx.helper``), one in it and one
-    here."""
+    function of them; the top-tier iterations share their first steps), every second
+    one in the live helper process the context offers (``ctx.helper``), meanwhile
+    (:func:`ldhp_tamp.parallel.two_at_a_time`)."""
     out: list[Sweep | None] = [ctx.memo.get(("sweep", m, s)) for m, s in jobs]
     todo = [i for i, sw in enumerate(out) if sw is None]
     done = two_at_a_time(ctx.helper() if ctx.helper is not None else None, [jobs[i] for i in todo],
