@@ -24,10 +24,18 @@
  *  - counting_order(keys, order, starts): the stable order of keys in [0, size) (numpy's
  *    argsort(kind="stable")) and, in starts (size + 1), where each key's run begins in
  *    it (searchsorted of the sorted keys), by one counting pass.
+ *  - select_pairs(starts, dst, rows, members[, sense, finger, travel, out_src, out_dst,
+ *    out_sense, out_finger, out_travel]): a layer's candidate edges from a table of every
+ *    pair of the grasp set by source (adjust_grasp._PairTable: source g's pairs are
+ *    starts[g] .. starts[g + 1] - 1, int64; dst int32, sense and finger int8, travel
+ *    double): the pairs of the sources rows (int64, strictly ascending) whose destination
+ *    is in members (a byte per grasp), in the table's order. Returns how many; given the
+ *    out buffers (as many items each: src and dst int64) it copies them out too. numpy's
+ *    form masks the whole table (sources in rows and destinations in members).
  *
  * Buffers are C-contiguous: doubles, int32 (the indices: a layer's edges and grasps are
- * far fewer than 2^31), int8, and counting_order's keys int64. The GIL is released while
- * computing.
+ * far fewer than 2^31), int8, and int64 where said (counting_order's keys, select_pairs'
+ * starts, rows and outputs). The GIL is released while computing.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -36,7 +44,7 @@
 #include <string.h>
 
 /* the interface ldhp_tamp.grasp_graph expects (its SEARCH_API) */
-#define API_VERSION 2
+#define API_VERSION 3
 
 /* whether the indices of a relax() or spread() call lie where the arrays are (they come
    from grasp_graph._LayerGraph.of; a bad one is a ValueError, not a stray read) */
@@ -211,6 +219,108 @@ done:
     return result;
 }
 
+/* select_pairs(): count the pairs (o_src == NULL) or copy them out too, at most cap of
+   them (*count then says how many there are, cap + 1 once past it); 0, or a bad index's
+   position + 1 (dst outside [0, size)) */
+static Py_ssize_t
+select_of(const int64_t *starts, const int32_t *dst, const int64_t *rows, Py_ssize_t R, const uint8_t *members,
+          Py_ssize_t size, const int8_t *sense, const int8_t *finger, const double *travel, int64_t *o_src,
+          int64_t *o_dst, int8_t *o_sense, int8_t *o_finger, double *o_travel, Py_ssize_t cap, Py_ssize_t *count)
+{
+    Py_ssize_t n = 0;
+    for (Py_ssize_t i = 0; i < R; i++) {
+        int64_t g = rows[i];
+        for (int64_t j = starts[g]; j < starts[g + 1]; j++) {
+            int64_t d = dst[j];
+            if (d < 0 || d >= size)
+                return (Py_ssize_t)j + 1;
+            if (!members[d])
+                continue;
+            if (o_src != NULL) {
+                if (n == cap) {
+                    *count = cap + 1;
+                    return 0;
+                }
+                o_src[n] = g;
+                o_dst[n] = d;
+                o_sense[n] = sense[j];
+                o_finger[n] = finger[j];
+                o_travel[n] = travel[j];
+            }
+            n++;
+        }
+    }
+    *count = n;
+    return 0;
+}
+
+static PyObject *
+select_pairs_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    Py_buffer starts, dst, rows, members, b[8];
+    memset(b, 0, sizeof(b));
+    if (!PyArg_ParseTuple(args, "y*y*y*y*|y*y*y*w*w*w*w*w*", &starts, &dst, &rows, &members, &b[0], &b[1], &b[2],
+                          &b[3], &b[4], &b[5], &b[6], &b[7]))
+        return NULL;
+    PyObject *result = NULL;
+    Py_buffer *all[] = {&starts, &dst, &rows, &members, &b[0], &b[1], &b[2], &b[3], &b[4], &b[5], &b[6], &b[7]};
+    int copy = b[0].obj != NULL;
+    const char *name = "select_pairs";
+    Py_ssize_t L = (Py_ssize_t)sizeof(int64_t), I = (Py_ssize_t)sizeof(int32_t), D = (Py_ssize_t)sizeof(double);
+    Py_ssize_t size = members.len, E = dst.len / I, R = rows.len / L, cap = 0;
+    if (!check(&starts, L, size + 1, name, "starts") || !check(&dst, I, E, name, "dst")
+        || !check(&rows, L, R, name, "rows") || !check(&members, 1, size, name, "members"))
+        goto done;
+    if (copy) {
+        if (b[7].obj == NULL) {
+            PyErr_SetString(PyExc_TypeError, "select_pairs: the payload (sense, finger, travel) and all five outputs, "
+                                             "or none of them");
+            goto done;
+        }
+        cap = b[3].len / L;
+        if (!check(&b[0], 1, E, name, "sense") || !check(&b[1], 1, E, name, "finger")
+            || !check(&b[2], D, E, name, "travel") || !check(&b[3], L, cap, name, "out_src")
+            || !check(&b[4], L, cap, name, "out_dst") || !check(&b[5], 1, cap, name, "out_sense")
+            || !check(&b[6], 1, cap, name, "out_finger") || !check(&b[7], D, cap, name, "out_travel"))
+            goto done;
+    }
+    const int64_t *st = starts.buf, *rw = rows.buf;
+    for (Py_ssize_t i = 0; i <= size; i++) {
+        if (st[i] < 0 || st[i] > E || (i > 0 && st[i] < st[i - 1]) || (i == 0 && st[i] != 0)
+            || (i == size && st[i] != E)) {
+            PyErr_Format(PyExc_ValueError, "%s: starts must rise from 0 to the %zd pairs of dst", name, E);
+            goto done;
+        }
+    }
+    for (Py_ssize_t i = 0; i < R; i++) {
+        if (rw[i] < 0 || rw[i] >= size || (i > 0 && rw[i] <= rw[i - 1])) {
+            PyErr_Format(PyExc_ValueError, "%s: rows must rise strictly within [0, %zd)", name, size);
+            goto done;
+        }
+    }
+    Py_ssize_t n = 0, bad;
+    Py_BEGIN_ALLOW_THREADS
+    bad = select_of(st, dst.buf, rw, R, members.buf, size, copy ? b[0].buf : NULL, copy ? b[1].buf : NULL,
+                    copy ? b[2].buf : NULL, copy ? b[3].buf : NULL, copy ? b[4].buf : NULL, copy ? b[5].buf : NULL,
+                    copy ? b[6].buf : NULL, copy ? b[7].buf : NULL, cap, &n);
+    Py_END_ALLOW_THREADS
+    if (bad) {
+        PyErr_Format(PyExc_ValueError, "%s: dst[%zd] outside [0, %zd)", name, bad - 1, size);
+        goto done;
+    }
+    if (copy && n != cap) {
+        PyErr_Format(PyExc_ValueError, "%s: the outputs hold %zd pairs, %s", name, cap,
+                     n > cap ? "more are selected" : "fewer are selected");
+        goto done;
+    }
+    result = PyLong_FromSsize_t(n);
+done:
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
+        if (all[q]->obj != NULL)
+            PyBuffer_Release(all[q]);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"relax", relax_py, METH_VARARGS,
      "relax(cost, other, valid, order, keys, heads, h0, out): Bellman-Ford rounds of the grasp graph's "
@@ -222,6 +332,10 @@ static PyMethodDef methods[] = {
     {"counting_order", counting_order_py, METH_VARARGS,
      "counting_order(keys, order, starts): the stable order of keys in [0, len(starts) - 1) and where each "
      "key's run starts in it."},
+    {"select_pairs", select_pairs_py, METH_VARARGS,
+     "select_pairs(starts, dst, rows, members[, sense, finger, travel, out_src, out_dst, out_sense, out_finger, "
+     "out_travel]): how many pairs of the sources rows have their destination in members; with the outputs, "
+     "those pairs copied out in the table's order."},
     {NULL, NULL, 0, NULL},
 };
 

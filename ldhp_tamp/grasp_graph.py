@@ -50,7 +50,6 @@ import shapely
 from numpy.typing import NDArray
 
 from geometry.collision import finger_shapes
-from geometry.compiled import load_extension
 from geometry.grasps import (
     NO_CONTACT,
     FingerPart,
@@ -69,6 +68,7 @@ from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS
 from geometry.world import GripperState, PolylineGripper, World
 from ldhp_tamp import budget
+from ldhp_tamp.kernels import SEARCH, SEARCH_API, csr  # noqa: F401  (SEARCH_API: the interface it calls)
 from ldhp_tamp.parallel import Helper, cores, two_at_a_time
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PRESS_KEY, Press, Step, Waypoint
@@ -94,11 +94,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: The interface version of ``ldhp_tamp/_search.c`` this module calls (its ``API``).
-SEARCH_API = 2
-#: The compiled array passes of the search (``ldhp_tamp/_search.c``), or ``None``: numpy
-#: computes the same arrays (:func:`geometry.compiled.load_extension`).
-_search = load_extension("ldhp_tamp._search", SEARCH_API)
+#: The compiled array passes of the search (``ldhp_tamp/_search.c``, interface
+#: ``SEARCH_API``), or ``None``: numpy computes the same arrays (:mod:`ldhp_tamp.kernels`).
+_search = SEARCH
 
 #: mm: a pivot the judge refuses takes with it the pivots of the same finger, the same way
 #: round, on a contact at most this far from its own (GraspPlanner.reject_adjust).
@@ -1207,20 +1205,7 @@ def _checks_by_layer(search: _Search) -> Counter:
     return spent
 
 
-def _csr(keys: IntArray, size: int) -> tuple[IntArray, IntArray]:
-    """The stable order of ``keys`` (in [0, size)) and where each key's run starts in it
-    (``size + 1`` offsets), both int32: one counting pass in the compiled module, else
-    numpy's argsort as 16-bit keys when they fit, which it sorts by radix (10x faster on a
-    layer's 300,000 slides), and a binary search."""
-    k = np.ascontiguousarray(keys, dtype=np.int64)
-    if k.size > np.iinfo(np.int32).max or size > np.iinfo(np.int32).max:
-        raise ValueError(f"{k.size} edges among {size} grasps: the search indexes them with 32 bits")
-    if _search is not None:
-        order, starts = np.empty(k.size, dtype=np.int32), np.empty(size + 1, dtype=np.int32)
-        _search.counting_order(k, order, starts)
-        return order, starts
-    order = np.argsort(k.astype(np.uint16) if size <= np.iinfo(np.uint16).max + 1 and k.size else k, kind="stable")
-    return order.astype(np.int32), np.searchsorted(k[order], np.arange(size + 1)).astype(np.int32)
+_csr = csr  # the stable order of keys and their runs' starts (:func:`ldhp_tamp.kernels.csr`)
 
 
 @dataclass(frozen=True, eq=False)

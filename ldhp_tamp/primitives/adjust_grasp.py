@@ -64,6 +64,7 @@ from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS, PENETRATION_TOL, WAYPOINT_STEP
 from geometry.world import PolylineGripper, TwoPointGripper, World
 from ldhp_tamp.errors import InputError
+from ldhp_tamp.kernels import SEARCH, csr
 from ldhp_tamp.primitives.registry import REGISTRY, Family
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -427,6 +428,63 @@ def _group_pairs(groups: _Groups, sources: IntArray) -> tuple[IntArray, IntArray
     rep = np.repeat(src, cnt)
     offs = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(int(cnt.sum()))
     return rep, groups.members[offs]
+
+
+#: The compiled selection of a layer's edges from a table of pairs (``ldhp_tamp/_search.c``),
+#: or ``None``: numpy masks the table (:meth:`_PairTable.select`).
+_search = SEARCH
+
+
+@dataclass(frozen=True, eq=False)
+class _PairTable:
+    """Every candidate edge of a primitive in a grasp set, whatever the pose, by source.
+
+    A primitive whose candidates do not depend on the object pose (``pivot``, ``slide``)
+    builds it once per grasp set from its tables of pairs; a layer's candidates are then
+    the rows of its sources whose destination it allows (:meth:`select`), already in the
+    order the grasp graph reads (by source, stably: a source's edges in the order the
+    parts were given). Source g's rows are ``starts[g]`` .. ``starts[g + 1] - 1``; 14
+    bytes a row (the sources are the starts')."""
+
+    dst: NDArray[np.int32]
+    sense: NDArray[np.int8]
+    finger: NDArray[np.int8]
+    travel: FloatArray
+    starts: IntArray  # (G + 1,) int64
+
+    @staticmethod
+    def of(parts: Sequence[tuple[IntArray, IntArray, ArrayLike, ArrayLike, FloatArray]], size: int) -> "_PairTable":
+        """The table of ``parts`` ``(src, dst, sense, finger, travel)`` (a scalar sense or
+        finger stands for every pair of its part) over ``size`` grasps."""
+        def column(i: int, dtype: Any) -> NDArray[Any]:
+            return np.concatenate([np.broadcast_to(np.asarray(p[i], dtype=dtype), np.shape(p[0])) for p in parts]
+                                  + [np.zeros(0, dtype)])
+
+        order, starts = csr(column(0, np.int64), size)
+        dst, sense, finger, travel = (column(i, dtype)[order] for i, dtype in ((1, np.int32), (2, np.int8),
+                                                                                (3, np.int8), (4, float)))
+        return _PairTable(dst, sense, finger, travel, starts.astype(np.int64))
+
+    def select(self, rows: IntArray, members: BoolArray
+               ) -> tuple[IntArray, IntArray, NDArray[np.int8], NDArray[np.int8], FloatArray]:
+        """(src, dst, sense, finger, travel) of the pairs from ``rows`` (ascending, no
+        repeats) to a grasp of ``members``, in the table's order (the compiled pass walks
+        the rows' runs; numpy masks the whole table, to the same arrays)."""
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        allowed = np.ascontiguousarray(members, dtype=bool)
+        if _search is not None:
+            view = allowed.view(np.uint8)
+            n = _search.select_pairs(self.starts, self.dst, rows, view)
+            out = (np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int8), np.empty(n, np.int8),
+                   np.empty(n))
+            _search.select_pairs(self.starts, self.dst, rows, view, self.sense, self.finger, self.travel, *out)
+            return out
+        size = self.starts.size - 1
+        src = np.repeat(np.arange(size, dtype=np.int64), np.diff(self.starts))
+        is_src = np.zeros(size, dtype=bool)
+        is_src[rows] = True
+        keep = is_src[src] & allowed[self.dst]
+        return src[keep], self.dst[keep].astype(np.int64), self.sense[keep], self.finger[keep], self.travel[keep]
 
 
 @dataclass(frozen=True, eq=False)
@@ -1540,34 +1598,36 @@ class Pivot(_AdjustGrasp):
     name = "pivot"
 
     def prepare(self, context: AdjustContext) -> None:
-        for k in range(2):
-            self._pairs(context, k)
-            self._rolls(context, k)
+        self._table(context)
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
-        is_src = np.zeros(len(ctx.grasps), dtype=bool)
-        is_src[src] = True
-        out = []
+        return self._table(ctx).select(src, members)
+
+    def _table(self, ctx: AdjustContext) -> _PairTable:
+        """Every pivot of the grasp set, by source; built once per grasp set. For finger
+        0, then finger 1: each pair of :meth:`_pairs` turned counter-clockwise and
+        clockwise at the wider width (senses 1, -1), the pairs that change the width
+        turned either way at the narrower one too (2, -2), then the rolls
+        (:meth:`_rolls`, ``ROLL_SENSE`` times the turn's sign). Travel: the turn (the
+        chosen way round) times the mean anchor radius, plus half the width change, or
+        for a roll the turn times the radius plus the slip."""
+        hit = ctx._cache.get("pivot-table")
+        if hit is not None:
+            return hit
+        parts = []
         for k in range(2):
             a, b, delta, wide, narrow, radial = self._pairs(ctx, k)
-            keep = is_src[a] & members[b]
-            a, b, delta, wide, narrow, radial = a[keep], b[keep], delta[keep], wide[keep], narrow[keep], radial[keep]
             both = np.flatnonzero(radial > 0.0)  # the width changes: both turn widths
             for sense in (1, -1, 2, -2):
                 i = np.arange(a.size) if abs(sense) == 1 else both
                 rad = (wide if abs(sense) == 1 else narrow)[i]
                 ang = _turn(delta[i], np.sign(sense))
-                out.append((a[i], b[i], np.full(i.size, sense), np.full(i.size, k), np.abs(ang) * rad + radial[i]))
+                parts.append((a[i], b[i], sense, k, np.abs(ang) * rad + radial[i]))
             a, b, delta, rad, resid = self._rolls(ctx, k)
-            keep = is_src[a] & members[b]
-            out.append((a[keep], b[keep], ROLL_SENSE * np.sign(delta[keep]).astype(np.int64), np.full(int(keep.sum()), k),
-                        np.abs(delta[keep]) * rad[keep] + np.abs(resid[keep])))
-        if not out:
-            z = np.zeros(0, np.int64)
-            return z, z, z, z, np.zeros(0)
-        a, b, sense, f, travel = (np.concatenate(x) for x in zip(*out))
-        return a, b, sense, f, travel
+            parts.append((a, b, ROLL_SENSE * np.sign(delta).astype(np.int64), k, np.abs(delta) * rad + np.abs(resid)))
+        hit = ctx._cache["pivot-table"] = _PairTable.of(parts, len(ctx.grasps))
+        return hit
 
     @staticmethod
     def _pairs(ctx: AdjustContext, k: int
@@ -1814,20 +1874,20 @@ class Slide(_AdjustGrasp):
     name = "slide"
 
     def prepare(self, context: AdjustContext) -> None:
-        for k in range(2):
-            self._pairs(context, k)
+        self._table(context)
 
     def _candidates(self, ctx: AdjustContext, pose: Pose, src: IntArray, members: BoolArray
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, FloatArray]:
-        is_src = np.zeros(len(ctx.grasps), dtype=bool)
-        is_src[src] = True
-        out = []
-        for k in range(2):
-            a, b, travel = self._pairs(ctx, k)
-            keep = is_src[a] & members[b]
-            out.append((a[keep], b[keep], np.full(int(keep.sum()), k), travel[keep]))
-        a, b, f, travel = (np.concatenate(x) for x in zip(*out))
-        return a, b, np.zeros(a.size, np.int64), f, travel
+        return self._table(ctx).select(src, members)
+
+    def _table(self, ctx: AdjustContext) -> _PairTable:
+        """Every slide of the grasp set (:meth:`_pairs` of finger 0, then finger 1; sense
+        0), by source; built once per grasp set."""
+        hit = ctx._cache.get("slide-table")
+        if hit is None:
+            parts = [(a, b, 0, k, travel) for k in range(2) for a, b, travel in [self._pairs(ctx, k)]]
+            hit = ctx._cache["slide-table"] = _PairTable.of(parts, len(ctx.grasps))
+        return hit
 
     @staticmethod
     def _pairs(ctx: AdjustContext, k: int) -> tuple[IntArray, IntArray, FloatArray]:

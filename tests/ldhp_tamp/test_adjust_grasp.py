@@ -324,9 +324,11 @@ def test_holds_among_some_grasps_decides_them_as_for_all() -> None:
     assert np.array_equal(ctx.holds(pose), everything)
 
 
-def test_slide_candidates_from_the_precomputed_pairs_are_the_per_layer_ones() -> None:
+def test_slide_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(monkeypatch: pytest.MonkeyPatch) -> None:
     """Slide's pairs are computed once per grasp set; a layer's candidates must be what
-    pairing its own sources within their slide groups gives, in the same order."""
+    pairing its own sources within their slide groups gives, by source (stably: a
+    source's slides of finger 0 first, each finger's in group order), whether the
+    compiled pass or numpy selects them."""
     from pathlib import Path
 
     from ldhp_tamp.primitives.adjust_grasp import AdjustContext, Slide, _group_pairs
@@ -340,6 +342,13 @@ def test_slide_candidates_from_the_precomputed_pairs_are_the_per_layer_ones() ->
         members = rng.random(len(gs)) < 0.6
         src = np.flatnonzero(members & (rng.random(len(gs)) < 0.8))
         got = Slide()._candidates(ctx, sc.start, src, members)
+        if trial % 2:  # numpy's selection, the same arrays
+            monkeypatch.setattr(ag, "_search", None)
+            alone = AdjustContext(sc.world, gs)
+            for x, y in zip(got, Slide()._candidates(alone, sc.start, src, members)):
+                np.testing.assert_array_equal(x, y)
+                assert x.dtype == y.dtype
+            monkeypatch.undo()
         want = []
         for k in range(2):  # the per-layer computation
             s = src[gs.touching[src, k]]
@@ -350,6 +359,8 @@ def test_slide_candidates_from_the_precomputed_pairs_are_the_per_layer_ones() ->
             keep = members[b] & (a != b) & (travel <= ctx.options.slide_max_travel)
             want.append((a[keep], b[keep], np.full(int(keep.sum()), k), travel[keep]))
         a, b, f, travel = (np.concatenate(x) for x in zip(*want))
+        by_source = np.argsort(a, kind="stable")
+        a, b, f, travel = a[by_source], b[by_source], f[by_source], travel[by_source]
         assert a.size > 100
         for x, y in zip(got, (a, b, np.zeros(a.size, np.int64), f, travel)):
             np.testing.assert_array_equal(x, y)
@@ -359,7 +370,8 @@ def test_slide_candidates_from_the_precomputed_pairs_are_the_per_layer_ones() ->
 def test_pivot_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(scenario: str) -> None:
     """The candidates of a layer are the pairs of its sources and members among the grasps
     sharing the pivot point: at one width, or a pinch and a one-finger grasp on the kept
-    finger at a larger width (both turn widths for those); both senses each."""
+    finger at a larger width (both turn widths for those); both senses each; by source,
+    each source's in that order (finger 0's first)."""
     from pathlib import Path
 
     from geometry.poses import wrap_angle
@@ -402,6 +414,7 @@ def test_pivot_candidates_from_the_precomputed_pairs_are_the_per_layer_ones(scen
             ang = np.where(d * np.sign(sense) > 0, d, d + np.sign(sense) * 2.0 * np.pi)
             want.append((a[i], b[i], np.full(i.size, sense), np.full(i.size, k), np.abs(ang) * rad + 0.5 * np.abs(wb - wa)[i]))
     want = [np.concatenate(x) for x in zip(*want)]
+    want = [x[np.argsort(want[0], kind="stable")] for x in want]  # by source, each source's as above
     assert want[0].size > 20
     for x, y in zip(got[:4], want[:4]):
         np.testing.assert_array_equal(x, y)
@@ -687,8 +700,8 @@ def test_hypot_is_numpys_norm_to_the_bit() -> None:
 @pytest.mark.parametrize("case", ["poly", "ranged"])
 def test_prepare_builds_ahead_the_tables_the_first_proposals_would(case: str, request) -> None:
     """``prepare`` builds the grasp-set tables (pivots' pairs and rolls, slides' pairs,
-    closings' groups) into the context's caches; proposals afterwards are those of a
-    context that built them on the way."""
+    the two primitives' tables of every edge, closings' groups) into the context's
+    caches; proposals afterwards are those of a context that built them on the way."""
     c: Case = request.getfixturevalue(case)
     prims = [ag.ApproachContact(), ag.Open(), ag.Close(), ag.Pivot(), ag.Slide(), ag.Flip()]
     ready = ag.AdjustContext(c.world, c.grasps)
@@ -697,6 +710,7 @@ def test_prepare_builds_ahead_the_tables_the_first_proposals_would(case: str, re
     keys = {key for key in ready._cache if isinstance(key, tuple) and isinstance(key[0], str)}
     assert {("pivot-pairs", 0), ("pivot-pairs", 1), ("pivot-rolls", 0), ("pivot-rolls", 1),
             ("slide-pairs", 0), ("slide-pairs", 1)} <= keys
+    assert {"pivot-table", "slide-table"} <= set(ready._cache)
     assert ("close_groups" in vars(ready)) == (not c.world.gripper.fixed_width)
     assert not any(key[0] in ("layer", "holds") for key in keys)  # nothing per pose
     fresh = ag.AdjustContext(c.world, c.grasps)

@@ -1,6 +1,8 @@
 """Tests of ldhp_tamp/_search.c, the grasp graph's compiled array passes: the Bellman-Ford
-rounds of the optimistic passes (backward and forward) and the counting order give numpy's
-arrays bit for bit, and the search falls back to numpy where the module is not loaded."""
+rounds of the optimistic passes (backward and forward), the counting order and the
+selection of a layer's candidate edges from an AdjustGrasp primitive's table of pairs give
+numpy's arrays bit for bit, and the search falls back to numpy where the module is not
+loaded."""
 
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ import pytest
 
 import geometry.compiled as compiled
 import ldhp_tamp.grasp_graph as gg
+import ldhp_tamp.primitives.adjust_grasp as ag
 
 search = pytest.mark.skipif(gg._search is None,
                             reason="the compiled passes are not built, or LDHP_TAMP_PURE_NUMPY leaves them out")
@@ -146,3 +149,56 @@ def test_spread_lowers_the_destinations_of_reached_sources() -> None:
     out = np.empty((2, 3))
     gg._search.spread(cost, other, valid, order, keys, heads, np.array([0.0, np.inf, np.inf]), out)
     np.testing.assert_array_equal(out, [[0.0, 2.0, 5.0], [0.0, 2.0, 5.0]])
+
+
+def _random_table(rng: np.random.Generator, size: int, pairs: int) -> "ag._PairTable":
+    src = rng.integers(0, size, pairs)
+    dst = rng.integers(0, size, pairs)
+    sense = rng.integers(-3, 4, pairs)
+    parts = [(src[i::3], dst[i::3], sense[i::3], i % 2, rng.random(src[i::3].size) * 50.0) for i in range(3)]
+    return ag._PairTable.of(parts + [(np.array([0]), np.array([size - 1]), 3, 1, np.array([7.5]))], size)
+
+
+@search
+@pytest.mark.parametrize("size, pairs", [(1, 0), (7, 40), (300, 4000), (5000, 160_000)])
+def test_the_compiled_pair_selection_is_numpys(size: int, pairs: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(size + pairs)
+    table = _random_table(rng, size, pairs)
+    # the table: by source, each source's pairs in the parts' order (stable)
+    src = np.repeat(np.arange(size), np.diff(table.starts))
+    assert table.starts[-1] == pairs + 1 and (np.diff(table.starts) >= 0).all() and table.dst.dtype == np.int32
+    for share in (0.0, 0.3, 1.0):
+        rows = np.flatnonzero(rng.random(size) < share)
+        members = rng.random(size) < 0.6
+        got = table.select(rows, members)
+        monkeypatch.setattr(ag, "_search", None)
+        want = table.select(rows, members)
+        monkeypatch.undo()
+        for x, y in zip(got, want):
+            np.testing.assert_array_equal(x, y)
+            assert x.dtype == y.dtype
+        keep = np.isin(src, rows) & members[table.dst]
+        np.testing.assert_array_equal(got[0], src[keep])
+        np.testing.assert_array_equal(got[4], table.travel[keep])
+
+
+@search
+def test_the_pair_selection_refuses_what_it_cannot_read() -> None:
+    table = ag._PairTable.of([(np.array([0, 0, 2]), np.array([1, 2, 0]), 1, 0, np.array([1.0, 2.0, 3.0]))], 3)
+    sel = ag._search.select_pairs
+    members = np.ones(3, dtype=np.uint8)
+    assert sel(table.starts, table.dst, np.array([0, 2]), members) == 3
+    out = (np.empty(2, np.int64), np.empty(2, np.int64), np.empty(2, np.int8), np.empty(2, np.int8), np.empty(2))
+    with pytest.raises(ValueError, match="outputs hold 2"):  # fewer places than pairs: nothing written past them
+        sel(table.starts, table.dst, np.array([0, 2]), members, table.sense, table.finger, table.travel, *out)
+    for rows in (np.array([2, 0]), np.array([0, 0]), np.array([3])):
+        with pytest.raises(ValueError, match="rows"):
+            sel(table.starts, table.dst, rows, members)
+    with pytest.raises(ValueError, match="outside"):
+        sel(table.starts, np.array([1, 5, 0], dtype=np.int32), np.array([0]), members)
+    with pytest.raises(ValueError, match="starts"):
+        sel(np.array([0, 2, 1, 3]), table.dst, np.array([0]), members)
+    with pytest.raises(ValueError, match="starts"):  # 64-bit destinations are not read as 32-bit ones
+        sel(table.starts, table.dst.astype(np.int64), np.array([0]), members)
+    with pytest.raises(TypeError, match="outputs"):
+        sel(table.starts, table.dst, np.array([0]), members, table.sense)
