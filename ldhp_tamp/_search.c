@@ -24,6 +24,17 @@
  *  - counting_order(keys, order, starts): the stable order of keys in [0, size) (numpy's
  *    argsort(kind="stable")) and, in starts (size + 1), where each key's run begins in
  *    it (searchsorted of the sorted keys), by one counting pass.
+ *  - layer_order(srcs, dsts, costs, order, starts, dst, cost): a layer's candidate edges,
+ *    given as each primitive's (src, dst, cost) (tuples of int64, int64 and double
+ *    buffers), in one order by source: counting_order of their sources concatenated, and
+ *    the destinations (as int32) and costs taken in that order (grasp_graph._LayerGraph.of;
+ *    numpy concatenates the primitives' arrays and takes them in the order).
+ *  - near_best(valid, order, keys, heads, dst, cost, fwd, bwd, bound, out, f): the
+ *    positions of a layer's edges not yet checked (valid[order[j]] == 0) whose cheapest
+ *    optimistic path through them, (fwd[source] + cost[j]) + bwd[dst[j]], is at most
+ *    bound, ascending, into out (int32), and those costs into f (room for every edge in
+ *    both); returns how many (grasp_graph._select; numpy's form computes the cost of
+ *    every edge).
  *  - select_pairs(starts, dst, rows, members[, sense, finger, travel, out_src, out_dst,
  *    out_sense, out_finger, out_travel]): a layer's candidate edges from a table of every
  *    pair of the grasp set by source (adjust_grasp._PairTable: source g's pairs are
@@ -44,7 +55,7 @@
 #include <string.h>
 
 /* the interface ldhp_tamp.grasp_graph expects (its SEARCH_API) */
-#define API_VERSION 3
+#define API_VERSION 4
 
 /* whether the indices of a relax() or spread() call lie where the arrays are (they come
    from grasp_graph._LayerGraph.of; a bad one is a ValueError, not a stray read) */
@@ -321,6 +332,165 @@ done:
     return result;
 }
 
+/* layer_order(): the parts' sources counted into starts, then each edge placed after
+   the earlier ones of its source (parts in order, each in its order: stable) */
+static PyObject *
+layer_order_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    PyObject *srcs, *dsts, *costs;
+    Py_buffer order, starts, dst, cost;
+    if (!PyArg_ParseTuple(args, "O!O!O!w*w*w*w*", &PyTuple_Type, &srcs, &PyTuple_Type, &dsts, &PyTuple_Type, &costs,
+                          &order, &starts, &dst, &cost))
+        return NULL;
+    const char *name = "layer_order";
+    PyObject *result = NULL;
+    Py_ssize_t P = PyTuple_GET_SIZE(srcs), got = 0;
+    Py_buffer *parts = PyMem_Calloc((size_t)(3 * P + 1), sizeof(Py_buffer));
+    int32_t *walk = NULL;
+    Py_ssize_t L = (Py_ssize_t)sizeof(int64_t), I = (Py_ssize_t)sizeof(int32_t), D = (Py_ssize_t)sizeof(double);
+    Py_ssize_t size = starts.len / I - 1, total = 0;
+    if (parts == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    if (PyTuple_GET_SIZE(dsts) != P || PyTuple_GET_SIZE(costs) != P) {
+        PyErr_Format(PyExc_ValueError, "%s: as many destinations and costs as sources", name);
+        goto done;
+    }
+    for (Py_ssize_t p = 0; p < P; p++) {
+        PyObject *three[3] = {PyTuple_GET_ITEM(srcs, p), PyTuple_GET_ITEM(dsts, p), PyTuple_GET_ITEM(costs, p)};
+        for (int q = 0; q < 3; q++) {
+            if (PyObject_GetBuffer(three[q], &parts[3 * p + q], PyBUF_C_CONTIGUOUS) < 0)
+                goto done;
+            got = 3 * p + q + 1;
+        }
+        Py_ssize_t n = parts[3 * p].len / L;
+        if (!check(&parts[3 * p], L, n, name, "src") || !check(&parts[3 * p + 1], L, n, name, "dst")
+            || !check(&parts[3 * p + 2], D, n, name, "cost"))
+            goto done;
+        total += n;
+    }
+    if (size < 0 || !check(&order, I, total, name, "order") || !check(&starts, I, size + 1, name, "starts")
+        || !check(&dst, I, total, name, "dst out") || !check(&cost, D, total, name, "cost out"))
+        goto done;
+    if (total > INT32_MAX) {
+        PyErr_Format(PyExc_ValueError, "%s: more than 2^31 - 1 edges", name);
+        goto done;
+    }
+    for (Py_ssize_t p = 0; p < P; p++) {
+        const int64_t *sp = parts[3 * p].buf, *dp = parts[3 * p + 1].buf;
+        for (Py_ssize_t j = 0, n = parts[3 * p].len / L; j < n; j++) {
+            if (sp[j] < 0 || sp[j] >= size || dp[j] < 0 || dp[j] >= size) {
+                PyErr_Format(PyExc_ValueError, "%s: an edge of part %zd outside [0, %zd)", name, p, size);
+                goto done;
+            }
+        }
+    }
+    walk = PyMem_Malloc((size_t)(size + 1) * sizeof(int32_t));
+    if (walk == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    int32_t *st = starts.buf, *ord = order.buf, *dout = dst.buf;
+    double *cout = cost.buf;
+    memset(st, 0, (size_t)(size + 1) * sizeof(int32_t));
+    for (Py_ssize_t p = 0; p < P; p++) {
+        const int64_t *sp = parts[3 * p].buf;
+        for (Py_ssize_t j = 0, n = parts[3 * p].len / L; j < n; j++)
+            st[sp[j] + 1]++;
+    }
+    for (Py_ssize_t i = 0; i < size; i++)
+        st[i + 1] += st[i];
+    memcpy(walk, st, (size_t)(size + 1) * sizeof(int32_t));
+    Py_ssize_t base = 0;
+    for (Py_ssize_t p = 0; p < P; p++) {
+        const int64_t *sp = parts[3 * p].buf, *dp = parts[3 * p + 1].buf;
+        const double *cp = parts[3 * p + 2].buf;
+        Py_ssize_t n = parts[3 * p].len / L;
+        for (Py_ssize_t j = 0; j < n; j++) {
+            int32_t at = walk[sp[j]]++;
+            ord[at] = (int32_t)(base + j);
+            dout[at] = (int32_t)dp[j];
+            cout[at] = cp[j];
+        }
+        base += n;
+    }
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    PyMem_Free(walk);
+    if (parts != NULL) {
+        for (Py_ssize_t q = 0; q < got; q++)
+            PyBuffer_Release(&parts[q]);
+        PyMem_Free(parts);
+    }
+    PyBuffer_Release(&order);
+    PyBuffer_Release(&starts);
+    PyBuffer_Release(&dst);
+    PyBuffer_Release(&cost);
+    return result;
+}
+
+/* near_best(): one pass over the source groups */
+static PyObject *
+near_best_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    Py_buffer valid, order, keys, heads, dst, cost, fwd, bwd, out, fout;
+    double bound;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*dw*w*", &valid, &order, &keys, &heads, &dst, &cost, &fwd, &bwd,
+                          &bound, &out, &fout))
+        return NULL;
+    const char *name = "near_best";
+    PyObject *result = NULL;
+    Py_buffer *all[] = {&valid, &order, &keys, &heads, &dst, &cost, &fwd, &bwd, &out, &fout};
+    Py_ssize_t D = (Py_ssize_t)sizeof(double), I = (Py_ssize_t)sizeof(int32_t);
+    Py_ssize_t E = cost.len / D, m = keys.len / I, size = fwd.len / D, V = valid.len;
+    if (!check(&valid, 1, V, name, "valid") || !check(&order, I, E, name, "order") || !check(&keys, I, m, name, "keys")
+        || !check(&heads, I, m, name, "heads") || !check(&dst, I, E, name, "dst") || !check(&cost, D, E, name, "cost")
+        || !check(&fwd, D, size, name, "fwd") || !check(&bwd, D, size, name, "bwd") || !check(&out, I, E, name, "out")
+        || !check(&fout, D, E, name, "f"))
+        goto done;
+    if (V != E) {
+        PyErr_Format(PyExc_ValueError, "%s: valid must have one entry per edge", name);
+        goto done;
+    }
+    int ok;
+    Py_ssize_t n = 0;
+    Py_BEGIN_ALLOW_THREADS
+    ok = indices_ok(dst.buf, order.buf, keys.buf, heads.buf, m, E, size);
+    if (ok) {
+        const int8_t *va = valid.buf;
+        const int32_t *ord = order.buf, *ks = keys.buf, *hs = heads.buf, *ds = dst.buf;
+        const double *c = cost.buf, *fw = fwd.buf, *bw = bwd.buf;
+        int32_t *o = out.buf;
+        double *fo = fout.buf;
+        for (Py_ssize_t i = 0; i < m; i++) {
+            Py_ssize_t lo = (Py_ssize_t)hs[i], hi = i + 1 < m ? (Py_ssize_t)hs[i + 1] : E;
+            double h = fw[ks[i]];
+            for (Py_ssize_t j = lo; j < hi; j++) {
+                if (va[ord[j]] != 0)
+                    continue;
+                double f = (h + c[j]) + bw[ds[j]];
+                if (f <= bound) {
+                    o[n] = (int32_t)j;
+                    fo[n++] = f;
+                }
+            }
+        }
+    }
+    Py_END_ALLOW_THREADS
+    if (!ok) {
+        PyErr_Format(PyExc_ValueError, "%s: an index outside its array (dst, order, keys or heads)", name);
+        goto done;
+    }
+    result = PyLong_FromSsize_t(n);
+done:
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
+        PyBuffer_Release(all[q]);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"relax", relax_py, METH_VARARGS,
      "relax(cost, other, valid, order, keys, heads, h0, out): Bellman-Ford rounds of the grasp graph's "
@@ -332,6 +502,14 @@ static PyMethodDef methods[] = {
     {"counting_order", counting_order_py, METH_VARARGS,
      "counting_order(keys, order, starts): the stable order of keys in [0, len(starts) - 1) and where each "
      "key's run starts in it."},
+    {"layer_order", layer_order_py, METH_VARARGS,
+     "layer_order(srcs, dsts, costs, order, starts, dst, cost): the primitives' candidate edges in one order by "
+     "source (grasp_graph._LayerGraph.of): the order of the indices, where each source's run starts, and the "
+     "destinations (int32) and costs in that order."},
+    {"near_best", near_best_py, METH_VARARGS,
+     "near_best(valid, order, keys, heads, dst, cost, fwd, bwd, bound, out, f): the positions of the unchecked edges "
+     "whose optimistic path through them costs at most bound (grasp_graph._select) and those costs, into out and f; "
+     "returns how many."},
     {"select_pairs", select_pairs_py, METH_VARARGS,
      "select_pairs(starts, dst, rows, members[, sense, finger, travel, out_src, out_dst, out_sense, out_finger, "
      "out_travel]): how many pairs of the sources rows have their destination in members; with the outputs, "

@@ -1234,9 +1234,18 @@ class _LayerGraph:
             none = np.zeros(0, dtype=np.int32)
             return _LayerGraph(tuple(cands), size, offsets, none, np.zeros(size + 1, dtype=np.int32), none,
                                np.zeros(0), none, none)
-        order, starts = _csr(np.concatenate([np.asarray(c.edges.src) for c in cands]), size)
-        dst = np.concatenate([np.asarray(c.edges.dst) for c in cands])[order].astype(np.int32)
-        cost = np.concatenate([np.asarray(c.cost, dtype=float) for c in cands])[order]
+        if _search is not None:  # one counting pass, the arrays taken without concatenating them
+            n = int(offsets[-1])
+            order, starts, dst, cost = (np.empty(n, np.int32), np.empty(size + 1, np.int32), np.empty(n, np.int32),
+                                        np.empty(n))
+            _search.layer_order(tuple(np.ascontiguousarray(c.edges.src, dtype=np.int64) for c in cands),
+                                tuple(np.ascontiguousarray(c.edges.dst, dtype=np.int64) for c in cands),
+                                tuple(np.ascontiguousarray(c.cost, dtype=float) for c in cands), order, starts, dst,
+                                cost)
+        else:
+            order, starts = _csr(np.concatenate([np.asarray(c.edges.src) for c in cands]), size)
+            dst = np.concatenate([np.asarray(c.edges.dst) for c in cands])[order].astype(np.int32)
+            cost = np.concatenate([np.asarray(c.cost, dtype=float) for c in cands])[order]
         keys = np.flatnonzero(np.diff(starts)).astype(np.int32)
         return _LayerGraph(tuple(cands), size, offsets, order, starts, dst, cost, keys, starts[keys])
 
@@ -1436,13 +1445,20 @@ def _select(lg: list[_LayerGraph], fwd: list[list[FloatArray]], bwd: list[list[F
     for k, lay in enumerate(lg):
         if not lay.order.size or (layer is not None and k != layer):
             continue
-        unk = lay.valid_all()[lay.order] == 0
-        f = fwd[k][-1][lay.src] + lay.cost + bwd[k][-1][lay.dst]
-        sel = np.flatnonzero(unk & (f <= best + slack))
+        if _search is not None:  # one pass over the layer's edges
+            sel, f_sel = np.empty(lay.order.size, np.int32), np.empty(lay.order.size)
+            n = _search.near_best(lay.valid_all(), lay.order, lay.keys, lay.heads, lay.dst, lay.cost, fwd[k][-1],
+                                  bwd[k][-1], best + slack, sel, f_sel)
+            sel, f_sel = sel[:n], f_sel[:n]
+        else:
+            unk = lay.valid_all()[lay.order] == 0
+            f = fwd[k][-1][lay.src] + lay.cost + bwd[k][-1][lay.dst]
+            sel = np.flatnonzero(unk & (f <= best + slack))
+            f_sel = f[sel]
         if sel.size:
             index = lay.order[sel]
             by_index = np.argsort(index)  # the candidates' order, in which ties are broken
-            rows.append((f[sel][by_index], np.full(sel.size, k), *lay.edges(index[by_index])))
+            rows.append((f_sel[by_index], np.full(sel.size, k), *lay.edges(index[by_index])))
     if rows:
         f, ks, ps, ix = (np.concatenate(x) for x in zip(*rows))
         for j in np.argsort(f, kind="stable"):

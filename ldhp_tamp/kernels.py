@@ -4,7 +4,8 @@
 :data:`SEARCH_API`, or ``None`` (not built, ``LDHP_TAMP_PURE_NUMPY`` set, or built from
 other sources: :func:`geometry.compiled.load_extension`); its callers compute the same
 arrays with numpy then. The grasp graph's Bellman-Ford rounds and counting order
-(:mod:`ldhp_tamp.grasp_graph`) and the AdjustGrasp primitives' selection of a layer's
+and the layer graphs' order and edge selection (:mod:`ldhp_tamp.grasp_graph`) and the
+AdjustGrasp primitives' selection of a layer's
 candidate edges from their tables of pairs (:mod:`ldhp_tamp.primitives.adjust_grasp`)
 call it; each pass gives numpy's result bit for bit (``tests/ldhp_tamp/test_search_kernels.py``).
 """
@@ -17,7 +18,7 @@ from geometry.compiled import load_extension
 from geometry.poses import IntArray
 
 #: The interface version of ``ldhp_tamp/_search.c`` this package calls (its ``API``).
-SEARCH_API = 3
+SEARCH_API = 4
 #: The module, or ``None``: numpy computes the same arrays.
 SEARCH = load_extension("ldhp_tamp._search", SEARCH_API)
 

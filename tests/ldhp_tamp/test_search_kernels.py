@@ -202,3 +202,55 @@ def test_the_pair_selection_refuses_what_it_cannot_read() -> None:
         sel(table.starts, table.dst.astype(np.int64), np.array([0]), members)
     with pytest.raises(TypeError, match="outputs"):
         sel(table.starts, table.dst, np.array([0]), members, table.sense)
+
+
+@search
+@pytest.mark.parametrize("size, edges", [(1, 0), (6, 30), (300, 4000), (5000, 120_000)])
+def test_the_compiled_layer_order_and_selection_are_numpys(size: int, edges: int,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """A layer graph's order by source, its destinations and costs (_LayerGraph.of), and
+    the edges the search checks next (_select: unchecked, near the best optimistic cost),
+    compiled and with numpy; the primitives' candidates need not come sorted."""
+    rng = np.random.default_rng(size * 3 + edges)
+    cands = list(_random_cands(rng, size, edges))
+    src = rng.integers(0, size, edges // 3)  # unsorted, as a primitive may propose them
+    cands.append(_Cands(src, rng.integers(0, size, src.size), rng.random(src.size), np.zeros(src.size, np.int8)))
+    cands.append(_Cands(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8)))
+    graphs = []
+    for module in (gg._search, None):
+        monkeypatch.setattr(gg, "_search", module)
+        graphs.append(gg._LayerGraph.of(tuple(cands), size))
+    (c, n) = graphs
+    for name in ("order", "starts", "dst", "cost", "keys", "heads", "offsets"):
+        x, y = getattr(c, name), getattr(n, name)
+        np.testing.assert_array_equal(x, y)
+        assert x.dtype == y.dtype, name
+    fwd = [[np.where(rng.random(size) < 0.7, rng.random(size) * 3, np.inf)]]
+    bwd = [[np.where(rng.random(size) < 0.7, rng.random(size) * 3, np.inf)]]
+    picked = 0
+    for best, slack in ((2.0, 1.0), (np.inf, 0.0), (0.5, 0.0)):
+        picks = []
+        for module in (gg._search, None):
+            monkeypatch.setattr(gg, "_search", module)
+            picks.append(gg._select([c], fwd, bwd, best, slack, batch=max(1, edges // 4), must=[]))
+        assert picks[0].keys() == picks[1].keys()
+        for key in picks[0]:
+            np.testing.assert_array_equal(picks[0][key], picks[1][key])
+        picked += sum(v.size for v in picks[0].values())
+    assert picked or not edges
+
+
+@search
+def test_the_layer_order_refuses_what_it_cannot_read() -> None:
+    order = gg._search.layer_order
+    i64, out = np.int64, lambda n: (np.empty(n, np.int32), np.empty(4, np.int32), np.empty(n, np.int32), np.empty(n))
+    good = ((np.array([2, 0], i64),), (np.array([1, 1], i64),), (np.array([1.0, 2.0]),))
+    order(*good, *out(2))
+    with pytest.raises(ValueError, match="outside"):
+        order((np.array([3, 0], i64),), good[1], good[2], *out(2))
+    with pytest.raises(ValueError, match="outside"):
+        order(good[0], (np.array([1, -1], i64),), good[2], *out(2))
+    with pytest.raises(ValueError, match="C-contiguous"):  # room for as many edges as given
+        order(*good, *out(3))
+    with pytest.raises(ValueError, match="as many"):
+        order(good[0], good[1] + good[1], good[2], *out(2))
