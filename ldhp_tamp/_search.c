@@ -35,6 +35,15 @@
  *    bound, ascending, into out (int32), and those costs into f (room for every edge in
  *    both); returns how many (grasp_graph._select; numpy's form computes the cost of
  *    every edge).
+ *  - slide_table(touching, of0, start0, members0, of1, start1, members1, x, y, max_travel,
+ *    starts[, dst, finger, travel]): the table of every slide of a grasp set
+ *    (adjust_grasp.Slide._table) straight from the slide groups: for each source g in
+ *    turn, finger 0's slides if g touches with finger 0, then finger 1's if g touches
+ *    with finger 1 alone; the members of g's group of that finger (of, start, members:
+ *    adjust_grasp._Groups, int64) in group order, but g itself and those farther than
+ *    max_travel (hypot of the grippers' x and y differences, as numpy's norm rounds it).
+ *    Fills starts (int64, G + 1) and returns how many slides; given dst (int32), finger
+ *    (int8) and travel (double) for that many, fills them too. touching is (G, 2) bytes.
  *  - select_pairs(starts, dst, rows, members[, sense, finger, travel, out_src, out_dst,
  *    out_sense, out_finger, out_travel]): a layer's candidate edges from a table of every
  *    pair of the grasp set by source (adjust_grasp._PairTable: source g's pairs are
@@ -55,7 +64,7 @@
 #include <string.h>
 
 /* the interface ldhp_tamp.grasp_graph expects (its SEARCH_API) */
-#define API_VERSION 4
+#define API_VERSION 5
 
 /* whether the indices of a relax() or spread() call lie where the arrays are (they come
    from grasp_graph._LayerGraph.of; a bad one is a ValueError, not a stray read) */
@@ -491,6 +500,126 @@ done:
     return result;
 }
 
+/* slide_table(): one pass (count, or fill) over the sources and their groups */
+static Py_ssize_t
+slides_of(const uint8_t *touching, const int64_t *of[2], const int64_t *start[2], const int64_t *members[2],
+          const double *x, const double *y, double max_travel, Py_ssize_t size, int64_t *starts, int32_t *dst,
+          int8_t *finger, double *travel)
+{
+    Py_ssize_t n = 0;
+    for (Py_ssize_t g = 0; g < size; g++) {
+        starts[g] = n;
+        for (int k = 0; k < 2; k++) {
+            if (!touching[2 * g + k] || (k == 1 && touching[2 * g]) || of[k][g] < 0)
+                continue;
+            int64_t grp = of[k][g];
+            for (int64_t i = start[k][grp]; i < start[k][grp + 1]; i++) {
+                int64_t m = members[k][i];
+                if (m == g)
+                    continue;
+                double dx = x[m] - x[g], dy = y[m] - y[g];
+                double t = sqrt(dx * dx + dy * dy);
+                if (!(t <= max_travel))
+                    continue;
+                if (dst != NULL) {
+                    dst[n] = (int32_t)m;
+                    finger[n] = (int8_t)k;
+                    travel[n] = t;
+                }
+                n++;
+            }
+        }
+    }
+    starts[size] = n;
+    return n;
+}
+
+static PyObject *
+slide_table_py(PyObject *Py_UNUSED(self), PyObject *args)
+{
+    Py_buffer touching, of0, start0, members0, of1, start1, members1, x, y, starts, b[3];
+    double max_travel;
+    memset(b, 0, sizeof(b));
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*y*dw*|w*w*w*", &touching, &of0, &start0, &members0, &of1, &start1,
+                          &members1, &x, &y, &max_travel, &starts, &b[0], &b[1], &b[2]))
+        return NULL;
+    const char *name = "slide_table";
+    PyObject *result = NULL;
+    Py_buffer *all[] = {&touching, &of0, &start0, &members0, &of1, &start1, &members1, &x, &y, &starts, &b[0], &b[1],
+                        &b[2]};
+    Py_ssize_t L = (Py_ssize_t)sizeof(int64_t), I = (Py_ssize_t)sizeof(int32_t), D = (Py_ssize_t)sizeof(double);
+    Py_ssize_t size = x.len / D;
+    Py_buffer *ofs[2] = {&of0, &of1}, *sts[2] = {&start0, &start1}, *mem[2] = {&members0, &members1};
+    if (!check(&x, D, size, name, "x") || !check(&y, D, size, name, "y") || !check(&touching, 1, 2 * size, name, "touching")
+        || !check(&starts, L, size + 1, name, "starts"))
+        goto done;
+    const int64_t *of[2], *start[2], *members[2];
+    for (int k = 0; k < 2; k++) {
+        Py_ssize_t groups = sts[k]->len / L - 1, count = mem[k]->len / L;
+        if (!check(ofs[k], L, size, name, "of") || groups < 0 || !check(sts[k], L, groups + 1, name, "start")
+            || !check(mem[k], L, count, name, "members"))
+            goto done;
+        of[k] = ofs[k]->buf;
+        start[k] = sts[k]->buf;
+        members[k] = mem[k]->buf;
+        for (Py_ssize_t g = 0; g < size; g++) {
+            if (of[k][g] < -1 || of[k][g] >= groups) {
+                PyErr_Format(PyExc_ValueError, "%s: a group outside [-1, %zd)", name, groups);
+                goto done;
+            }
+        }
+        for (Py_ssize_t i = 0; i <= groups; i++) {
+            if (start[k][i] < 0 || start[k][i] > count || (i > 0 && start[k][i] < start[k][i - 1])) {
+                PyErr_Format(PyExc_ValueError, "%s: group starts must rise within [0, %zd]", name, count);
+                goto done;
+            }
+        }
+        for (Py_ssize_t i = 0; i < count; i++) {
+            if (members[k][i] < 0 || members[k][i] >= size) {
+                PyErr_Format(PyExc_ValueError, "%s: a member outside [0, %zd)", name, size);
+                goto done;
+            }
+        }
+    }
+    int fill = b[0].obj != NULL;
+    Py_ssize_t n;
+    if (fill) {
+        if (b[2].obj == NULL) {
+            PyErr_SetString(PyExc_TypeError, "slide_table: dst, finger and travel, or none of them");
+            goto done;
+        }
+        Py_ssize_t cap = b[0].len / I;
+        if (!check(&b[0], I, cap, name, "dst") || !check(&b[1], 1, cap, name, "finger")
+            || !check(&b[2], D, cap, name, "travel"))
+            goto done;
+        Py_BEGIN_ALLOW_THREADS
+        n = slides_of(touching.buf, of, start, members, x.buf, y.buf, max_travel, size, starts.buf, NULL, NULL, NULL);
+        Py_END_ALLOW_THREADS
+        if (n != cap) {
+            PyErr_Format(PyExc_ValueError, "%s: %zd slides, room for %zd", name, n, cap);
+            goto done;
+        }
+        if (n > INT32_MAX) {
+            PyErr_Format(PyExc_ValueError, "%s: more than 2^31 - 1 slides", name);
+            goto done;
+        }
+        Py_BEGIN_ALLOW_THREADS
+        n = slides_of(touching.buf, of, start, members, x.buf, y.buf, max_travel, size, starts.buf, b[0].buf, b[1].buf,
+                      b[2].buf);
+        Py_END_ALLOW_THREADS
+    } else {
+        Py_BEGIN_ALLOW_THREADS
+        n = slides_of(touching.buf, of, start, members, x.buf, y.buf, max_travel, size, starts.buf, NULL, NULL, NULL);
+        Py_END_ALLOW_THREADS
+    }
+    result = PyLong_FromSsize_t(n);
+done:
+    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
+        if (all[q]->obj != NULL)
+            PyBuffer_Release(all[q]);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"relax", relax_py, METH_VARARGS,
      "relax(cost, other, valid, order, keys, heads, h0, out): Bellman-Ford rounds of the grasp graph's "
@@ -510,6 +639,10 @@ static PyMethodDef methods[] = {
      "near_best(valid, order, keys, heads, dst, cost, fwd, bwd, bound, out, f): the positions of the unchecked edges "
      "whose optimistic path through them costs at most bound (grasp_graph._select) and those costs, into out and f; "
      "returns how many."},
+    {"slide_table", slide_table_py, METH_VARARGS,
+     "slide_table(touching, of0, start0, members0, of1, start1, members1, x, y, max_travel, starts[, dst, finger, "
+     "travel]): every slide of a grasp set by source, from its slide groups (adjust_grasp.Slide._table): fills "
+     "starts and returns how many; with dst, finger and travel for that many, fills them too."},
     {"select_pairs", select_pairs_py, METH_VARARGS,
      "select_pairs(starts, dst, rows, members[, sense, finger, travel, out_src, out_dst, out_sense, out_finger, "
      "out_travel]): how many pairs of the sources rows have their destination in members; with the outputs, "

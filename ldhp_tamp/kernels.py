@@ -18,7 +18,7 @@ from geometry.compiled import load_extension
 from geometry.poses import IntArray
 
 #: The interface version of ``ldhp_tamp/_search.c`` this package calls (its ``API``).
-SEARCH_API = 4
+SEARCH_API = 5
 #: The module, or ``None``: numpy computes the same arrays.
 SEARCH = load_extension("ldhp_tamp._search", SEARCH_API)
 

@@ -460,10 +460,17 @@ class _PairTable:
             return np.concatenate([np.broadcast_to(np.asarray(p[i], dtype=dtype), np.shape(p[0])) for p in parts]
                                   + [np.zeros(0, dtype)])
 
-        order, starts = csr(column(0, np.int64), size)
-        dst, sense, finger, travel = (column(i, dtype)[order] for i, dtype in ((1, np.int32), (2, np.int8),
-                                                                                (3, np.int8), (4, float)))
-        return _PairTable(dst, sense, finger, travel, starts.astype(np.int64))
+        if _search is not None and parts:  # the grasp graph's pass: sources counted, the rest taken in order
+            n = sum(int(np.shape(p[0])[0]) for p in parts)
+            order, starts, dst, travel = (np.empty(n, np.int32), np.empty(size + 1, np.int32), np.empty(n, np.int32),
+                                          np.empty(n))
+            _search.layer_order(tuple(np.ascontiguousarray(p[0], dtype=np.int64) for p in parts),
+                                tuple(np.ascontiguousarray(p[1], dtype=np.int64) for p in parts),
+                                tuple(np.ascontiguousarray(p[4], dtype=float) for p in parts), order, starts, dst, travel)
+        else:
+            order, starts = csr(column(0, np.int64), size)
+            dst, travel = column(1, np.int32)[order], column(4, float)[order]
+        return _PairTable(dst, column(2, np.int8)[order], column(3, np.int8)[order], travel, starts.astype(np.int64))
 
     def select(self, rows: IntArray, members: BoolArray
                ) -> tuple[IntArray, IntArray, NDArray[np.int8], NDArray[np.int8], FloatArray]:
@@ -1882,11 +1889,27 @@ class Slide(_AdjustGrasp):
 
     def _table(self, ctx: AdjustContext) -> _PairTable:
         """Every slide of the grasp set (:meth:`_pairs` of finger 0, then finger 1; sense
-        0), by source; built once per grasp set."""
+        0), by source; built once per grasp set (by the compiled module from the slide
+        groups, to the same table)."""
         hit = ctx._cache.get("slide-table")
         if hit is None:
-            parts = [(a, b, 0, k, travel) for k in range(2) for a, b, travel in [self._pairs(ctx, k)]]
-            hit = ctx._cache["slide-table"] = _PairTable.of(parts, len(ctx.grasps))
+            if _search is not None:  # straight from the groups, as _pairs pairs them (one pass to count, one to fill)
+                gs = ctx.grasps
+                size = len(gs)
+                groups = [(np.ascontiguousarray(g.of, dtype=np.int64), np.ascontiguousarray(g.start, dtype=np.int64),
+                           np.ascontiguousarray(g.members, dtype=np.int64)) for g in ctx.slide_groups]
+                args = (np.ascontiguousarray(gs.touching, dtype=bool).view(np.uint8), *groups[0], *groups[1],
+                        np.ascontiguousarray(gs.gripper[:, 0], dtype=float),
+                        np.ascontiguousarray(gs.gripper[:, 1], dtype=float), float(ctx.options.slide_max_travel))
+                starts = np.empty(size + 1, np.int64)
+                n = _search.slide_table(*args, starts)
+                dst, finger, travel = np.empty(n, np.int32), np.empty(n, np.int8), np.empty(n)
+                _search.slide_table(*args, starts, dst, finger, travel)
+                hit = _PairTable(dst, np.zeros(n, np.int8), finger, travel, starts)
+            else:
+                parts = [(a, b, 0, k, travel) for k in range(2) for a, b, travel in [self._pairs(ctx, k)]]
+                hit = _PairTable.of(parts, len(ctx.grasps))
+            ctx._cache["slide-table"] = hit
         return hit
 
     @staticmethod

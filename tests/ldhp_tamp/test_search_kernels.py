@@ -164,6 +164,13 @@ def _random_table(rng: np.random.Generator, size: int, pairs: int) -> "ag._PairT
 def test_the_compiled_pair_selection_is_numpys(size: int, pairs: int, monkeypatch: pytest.MonkeyPatch) -> None:
     rng = np.random.default_rng(size + pairs)
     table = _random_table(rng, size, pairs)
+    monkeypatch.setattr(ag, "_search", None)
+    alone = _random_table(np.random.default_rng(size + pairs), size, pairs)  # the same table, built by numpy
+    monkeypatch.undo()
+    for name in ("dst", "sense", "finger", "travel", "starts"):
+        x, y = getattr(table, name), getattr(alone, name)
+        np.testing.assert_array_equal(x, y)
+        assert x.dtype == y.dtype, name
     # the table: by source, each source's pairs in the parts' order (stable)
     src = np.repeat(np.arange(size), np.diff(table.starts))
     assert table.starts[-1] == pairs + 1 and (np.diff(table.starts) >= 0).all() and table.dst.dtype == np.int32
@@ -254,3 +261,29 @@ def test_the_layer_order_refuses_what_it_cannot_read() -> None:
         order(*good, *out(3))
     with pytest.raises(ValueError, match="as many"):
         order(good[0], good[1] + good[1], good[2], *out(2))
+
+
+@search
+def test_the_slide_table_refuses_what_it_cannot_read() -> None:
+    slide = ag._search.slide_table
+    i64 = lambda *x: np.array(x, dtype=np.int64)  # noqa: E731
+    touching = np.array([[0, 0], [1, 0], [1, 1]], dtype=np.uint8)
+    group = (i64(-1, 0, 0), i64(0, 2), i64(1, 2))  # grasps 1 and 2 slide into each other with finger 0
+    none = (i64(-1, -1, -1), i64(0), i64())
+    x, y = np.array([0.0, 0.0, 3.0]), np.array([0.0, 0.0, 4.0])
+    starts = np.empty(4, np.int64)
+    assert slide(touching, *group, *none, x, y, 10.0, starts) == 2
+    np.testing.assert_array_equal(starts, [0, 0, 1, 2])
+    dst, finger, travel = np.empty(2, np.int32), np.empty(2, np.int8), np.empty(2)
+    slide(touching, *group, *none, x, y, 10.0, starts, dst, finger, travel)
+    np.testing.assert_array_equal(dst, [2, 1])
+    np.testing.assert_array_equal(travel, [5.0, 5.0])
+    assert slide(touching, *group, *none, x, y, 4.9, starts) == 0  # farther than the travel allowed
+    with pytest.raises(ValueError, match="room for 1"):
+        slide(touching, *group, *none, x, y, 10.0, starts, dst[:1], finger[:1], travel[:1])
+    with pytest.raises(ValueError, match="group outside"):
+        slide(touching, i64(-1, 0, 1), group[1], group[2], *none, x, y, 10.0, starts)
+    with pytest.raises(ValueError, match="member outside"):
+        slide(touching, group[0], group[1], i64(1, 3), *none, x, y, 10.0, starts)
+    with pytest.raises(TypeError, match="or none"):
+        slide(touching, *group, *none, x, y, 10.0, starts, dst)
