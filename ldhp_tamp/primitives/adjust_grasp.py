@@ -342,8 +342,15 @@ class IntraEdges:
         return int(self.src.shape[0])
 
     def cost(self, options: AdjustGraspOptions) -> FloatArray:
-        """``lambda1 * travel + lambda2 * switches`` per edge."""
-        return options.lambda1 * self.travel + options.lambda2 * self.switches
+        """``lambda1 * travel + lambda2 * switches`` per edge (into one new array: a layer
+        costs hundreds of thousands of edges; the same sums)."""
+        out = np.multiply(self.travel, options.lambda1, dtype=float)
+        sw = np.asarray(self.switches)
+        if sw.ndim == 1 and sw.size and sw.strides == (0,):  # one switch count for all (a proposal's)
+            out += options.lambda2 * float(sw[0])
+        else:
+            out += options.lambda2 * sw
+        return out
 
     def take(self, idx: ArrayLike) -> "IntraEdges":
         """Edges ``idx`` (the same flags and counts)."""

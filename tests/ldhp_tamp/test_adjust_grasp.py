@@ -724,3 +724,16 @@ def test_prepare_builds_ahead_the_tables_the_first_proposals_would(case: str, re
         a, b = prim.propose(ready, T0, src, members), prim.propose(fresh, T0, src, members)
         for name in ("src", "dst", "sense", "finger", "travel", "switches"):
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_edge_costs_are_the_formula_to_the_bit() -> None:
+    """``IntraEdges.cost`` is ``lambda1 * travel + lambda2 * switches`` (computed in place,
+    with one switch count for a proposal's broadcast switches)."""
+    rng = np.random.default_rng(12)
+    n = 5000
+    travel = rng.random(n) * 300.0
+    for switches in (np.broadcast_to(np.int64(1), (n,)), rng.integers(0, 3, n)):
+        edges = ag.IntraEdges("slide", np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int8),
+                              np.zeros(n, np.int8), travel, switches)
+        for options in (ag.AdjustGraspOptions(), ag.AdjustGraspOptions(lambda1=0.37, lambda2=3.3)):
+            assert edges.cost(options).tobytes() == (options.lambda1 * travel + options.lambda2 * switches).tobytes()
