@@ -31,7 +31,7 @@ from ldhp_tamp import budget
 from ldhp_tamp.contact_graph import PlanningContext
 from ldhp_tamp.parallel import fork_map, two_at_a_time
 from ldhp_tamp.path import Segment
-from ldhp_tamp.primitives.move_object import MARGIN_MM, carriers
+from ldhp_tamp.primitives.move_object import MARGIN_MM, carrier_candidates, carriers_among
 from ldhp_tamp.primitives.registry import DomainInfo, Family, PrimitiveRegistry, Transition
 
 log = logging.getLogger(__name__)
@@ -380,29 +380,51 @@ class PathSearch:
         ends may all miss the window where a carrying grasp both fits beside the
         environment and can be reached (task 1 held flat in the air: the tip's ends at
         1.4, 45 and 88.6 degrees, the lever pinch that carries the block to flat from 66
-        to 82 degrees only)."""
+        to 82 degrees only).
+
+        The ranking is (carriers, most first; the end's distance to the goal; the order
+        found). A pose's carriers are among its candidates (held at its orientation and
+        clear of the environment, :func:`_lift_off_candidates`), which cost about half as
+        much as the turn that decides them: the poses are taken by their candidates' count
+        and the turn is made only while a pose can still rank among the best ``limit``
+        (its count bounds its carriers'), so the same poses come first as with every
+        pose's carriers counted."""
         ctx = self.ctx
-        if ctx.grasps is None:
+        if ctx.grasps is None or self.limit < 1:
             return []
-        scored: list[tuple[int, float, int, tuple[Segment, ...]]] = []
+        entries: list[tuple[int, float, int, float, np.ndarray, np.ndarray, tuple[Any, ...], tuple[Segment, ...]]] = []
         done: set[tuple[object, float]] = set()
         for moves in samples:
             seg = moves[-1]
             if seg.to_state != t.to_state or (seg.motion, seg.s0) in done:
                 continue
             done.add((seg.motion, seg.s0))
-            key = ("lift-offs", seg.motion, seg.s0, t.to_state)
+            key = ("lift-off-candidates", seg.motion, seg.s0, t.to_state)
             if key not in ctx.memo:
-                ctx.memo[key] = _lift_off_values(ctx, seg, t.to_state)
-            for value, count in ctx.memo[key]:
+                ctx.memo[key] = _lift_off_candidates(ctx, seg, t.to_state)
+            for value, pose, held in ctx.memo[key]:
                 end = seg.motion.poses([value])
-                param = "travel" if seg.motion.kind is MotionKind.TRANSLATE else "angle"
-                length = abs(value - seg.s0)
-                params = dict(seg.parameters, **{param: round(length if param == "travel" else math.degrees(length), 6)})
-                moved = replace(seg, s1=float(value), parameters=params)
-                scored.append((-count, float(ctx.goal_distance(end)[0]), len(scored), moves[:-1] + (moved,)))
-        scored.sort(key=lambda x: x[:3])
-        return [moves for _, _, _, moves in scored[:self.limit]]
+                entries.append((-held.size, float(ctx.goal_distance(end)[0]), len(entries), value, pose, held, key,
+                                moves))
+        entries.sort(key=lambda x: x[:3])
+        best: list[tuple[int, float, int, float, tuple[Segment, ...]]] = []  # (-carriers, distance, order, ...)
+        for bound, distance, order, value, pose, held, key, moves in entries:
+            if len(best) >= self.limit and best[self.limit - 1][:3] < (bound, distance, order):
+                break  # no pose left can rank among the best: its carriers are at most its candidates
+            count_key = ("lift-off-carriers",) + key[1:] + (value,)
+            if count_key not in ctx.memo:
+                ctx.memo[count_key] = int(carriers_among(ctx, Pose.from_array(pose), held).size)
+            if ctx.memo[count_key]:
+                best.append((-ctx.memo[count_key], distance, order, value, moves))
+                best.sort(key=lambda x: x[:3])
+        out = []
+        for _, _, _, value, moves in best[:self.limit]:
+            seg = moves[-1]
+            param = "travel" if seg.motion.kind is MotionKind.TRANSLATE else "angle"
+            length = abs(value - seg.s0)
+            params = dict(seg.parameters, **{param: round(length if param == "travel" else math.degrees(length), 6)})
+            out.append(moves[:-1] + (replace(seg, s1=float(value), parameters=params),))
+        return out
 
     def _candidates(self, t: Transition, pose: Pose, lift_next: bool = False) -> Iterator[tuple[Segment, ...]]:
         """A transition's stream: the primitive's own samples from ``pose``; when it has
@@ -444,17 +466,21 @@ LIFT_OFF_STEP_MM = 10.0
 LIFT_OFF_FORK_MIN = 6
 
 
-def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) -> list[tuple[float, int]]:
-    """``(parameter, carriers)`` along ``seg``'s motion where it stays in ``state``, on the
-    grid of :meth:`PathSearch._lift_offs`, for the values with a carrier.
+def _lift_off_candidates(ctx: PlanningContext, seg: Segment, state: ContactState
+                         ) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """``(parameter, pose, candidates)`` along ``seg``'s motion where it stays in ``state``, on
+    the grid of :meth:`PathSearch._lift_offs`, for the values with a candidate: the grasps
+    that hold the object in the air at the pose's orientation and the goal's and are clear
+    of the environment there (:func:`ldhp_tamp.primitives.move_object.carrier_candidates`,
+    a superset of the pose's carriers).
 
     The poses are independent: with a live helper process whose state holds this grasp
     set (``ctx.helper(ctx.grasps)``, idle), every second one is computed there meanwhile
-    (:func:`ldhp_tamp.parallel.two_at_a_time`, :func:`_helper_carrier_count`); else the
-    machine's cores take them one at a time (:func:`ldhp_tamp.parallel.fork_map`, from
-    ``LIFT_OFF_FORK_MIN`` poses a core). A fork costs this process a page fault for each
-    page it writes afterwards (``docs/benchmarks.md``, "page faults"): the helper, forked
-    in the setup, spares the solve that second fork."""
+    (:func:`ldhp_tamp.parallel.two_at_a_time`, :func:`_helper_carrier_candidates`); else
+    the machine's cores take them one at a time (:func:`ldhp_tamp.parallel.fork_map`,
+    from ``LIFT_OFF_FORK_MIN`` poses a core). A fork costs this process a page fault for
+    each page it writes afterwards (``docs/benchmarks.md``, "page faults"): the helper,
+    forked in the setup, spares the solve that second fork."""
     motion = seg.motion
     s_max = ctx.reach if motion.kind is MotionKind.TRANSLATE else math.pi
     sw = sweep(ctx.world, motion, s_max)
@@ -469,32 +495,32 @@ def _lift_off_values(ctx: PlanningContext, seg: Segment, state: ContactState) ->
         return []
     values = np.linspace(a + margin, b - margin, n + 1)
     poses = list(motion.poses(values))
-    count = functools.partial(_carrier_count, ctx)
+    candidates = functools.partial(_carrier_candidates, ctx)
     helper = ctx.helper(ctx.grasps) if ctx.helper is not None else None
     if helper is not None and helper.idle:
-        counts = two_at_a_time(helper, poses, count, lambda pose: (_helper_carrier_count, (pose,)))
+        found = two_at_a_time(helper, poses, candidates, lambda pose: (_helper_carrier_candidates, (pose,)))
     else:
-        counts = fork_map(count, poses, ctx.jobs, min_items_per_core=LIFT_OFF_FORK_MIN)
-    return [(float(value), c) for value, c in zip(values, counts) if c]
+        found = fork_map(candidates, poses, ctx.jobs, min_items_per_core=LIFT_OFF_FORK_MIN)
+    return [(float(value), pose, held) for value, pose, held in zip(values, poses, found) if held.size]
 
 
-def _carrier_count(ctx: PlanningContext, pose: np.ndarray) -> int:
-    """How many grasps lift the object off at ``pose`` and carry it to the goal's
-    orientation (:func:`ldhp_tamp.primitives.move_object.carriers`)."""
-    found = carriers(ctx, Pose.from_array(pose))
-    return 0 if found is None else int(found.size)
+def _carrier_candidates(ctx: PlanningContext, pose: np.ndarray) -> np.ndarray:
+    """The grasps that may carry the object from ``pose`` to the goal's orientation
+    (:func:`ldhp_tamp.primitives.move_object.carrier_candidates`)."""
+    found = carrier_candidates(ctx, Pose.from_array(pose))
+    return np.zeros(0, np.int64) if found is None else found
 
 
-def _helper_carrier_count(state: tuple[Any, ...], pose: np.ndarray) -> int:
-    """:func:`_carrier_count` in the solve's helper process. Its state
+def _helper_carrier_candidates(state: tuple[Any, ...], pose: np.ndarray) -> np.ndarray:
+    """:func:`_carrier_candidates` in the solve's helper process. Its state
     (:meth:`ldhp_tamp.grasp_graph.GraspPlanner.start_helper`, forked in the setup of
     :func:`ldhp_tamp.tamp.solve`) is ``(world, grasps, motion options, AdjustGrasp
     context, (ctx, domain, registry))``: the setup's context, with the grasp set of the
-    helper's state, which is the streams' (:func:`_lift_off_values` asks for a helper
+    helper's state, which is the streams' (:func:`_lift_off_candidates` asks for a helper
     whose state holds the streams' grasp set: the enumerated set, or with the start
     grasp's row). ``ctx.memo`` is the helper's own: what it memoises (air holders per
     orientation, pure functions of the grasp set) stays there, as a forked child's did."""
-    return _carrier_count(replace(state[-1][0], grasps=state[1]), pose)
+    return _carrier_candidates(replace(state[-1][0], grasps=state[1]), pose)
 
 
 @dataclass(eq=False)

@@ -899,7 +899,17 @@ def carriers(ctx: PlanningContext, pose: Pose, *, first: bool = False) -> np.nda
     block lying on the floor cannot be lifted by a pinch whose lower finger would be in
     the floor, nor turned through an orientation no grasp of it holds. ``first``: only
     whether there is one (the first batch of CARRIER_BATCH candidates that has any).
-    Without a grasp set in the context: ``None``."""
+    Without a grasp set in the context: ``None``. :func:`carrier_candidates`, then
+    :func:`carriers_among` them."""
+    held = carrier_candidates(ctx, pose)
+    return None if held is None else carriers_among(ctx, pose, held, first=first)
+
+
+def carrier_candidates(ctx: PlanningContext, pose: Pose) -> np.ndarray | None:
+    """The grasps :func:`carriers` turns: those that hold the object in the air at the
+    pose's orientation (and the goal's) and are clear of the environment at ``pose``, a
+    superset of the carriers (the turn starts at the pose's orientation), computed
+    without the turn; ``None`` without a grasp set in the context."""
     if ctx.grasps is None:
         return None
     if _same_orientation(ctx, pose, ctx.goal):
@@ -909,6 +919,13 @@ def carriers(ctx: PlanningContext, pose: Pose, *, first: bool = False) -> np.nda
     if held.size:
         grip = ctx.grasps.world_gripper(pose.as_array(), held)
         held = held[~gripper_env_overlap(ctx.world, grip, ctx.grasps.width[held])]
+    return held
+
+
+def carriers_among(ctx: PlanningContext, pose: Pose, held: np.ndarray, *, first: bool = False) -> np.ndarray:
+    """:func:`carriers` at ``pose`` given its :func:`carrier_candidates` ``held``: those
+    that hold the object at every orientation of the turn to the goal's."""
+    assert ctx.grasps is not None
     if not held.size or _same_orientation(ctx, pose, ctx.goal):
         return held
     for longer in (False, True):

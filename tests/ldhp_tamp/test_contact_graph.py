@@ -252,9 +252,15 @@ def test_task1_streams_give_a_joined_path_to_the_goal(task1, domain) -> None:
             assert seg.step in (0, 1)
 
 
+def _same_lift_offs(a: list, b: list) -> bool:
+    """Two lists of ``(parameter, pose, candidates)``: the same, in the same order."""
+    return len(a) == len(b) and all(x[0] == y[0] and np.array_equal(x[1], y[1]) and np.array_equal(x[2], y[2])
+                                    for x, y in zip(a, b))
+
+
 def test_lift_off_values_are_the_same_on_the_cores(task1_grasps, domain, monkeypatch) -> None:
-    """The lift-off poses' carriers, computed by the machine's cores or by this process
-    alone: the same values and counts, in the same order."""
+    """The lift-off poses' carrier candidates, computed by the machine's cores or by this
+    process alone: the same values, poses and grasps, in the same order."""
     from dataclasses import replace
 
     from ldhp_tamp import parallel, streams
@@ -267,19 +273,19 @@ def test_lift_off_values_are_the_same_on_the_cores(task1_grasps, domain, monkeyp
     assert tip.primitive == "tip" and tip.to_state == S("v2-e1")
     monkeypatch.setattr(parallel, "cores", lambda: 2)
     monkeypatch.setattr(streams, "LIFT_OFF_FORK_MIN", 1)
-    shared = streams._lift_off_values(replace(base, memo={}), tip, S("v2-e1"))
+    shared = streams._lift_off_candidates(replace(base, memo={}), tip, S("v2-e1"))
     monkeypatch.setattr(streams, "LIFT_OFF_FORK_MIN", 10 ** 6)
-    alone = streams._lift_off_values(replace(base, memo={}), tip, S("v2-e1"))
-    assert shared == alone and len(alone) >= 3
+    alone = streams._lift_off_candidates(replace(base, memo={}), tip, S("v2-e1"))
+    assert _same_lift_offs(shared, alone) and len(alone) >= 3
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
 def test_lift_off_values_are_the_same_with_the_solves_helper(task1_grasps, domain, monkeypatch) -> None:
     """With the solve's helper alive (its state as the solve forks it: the grasp set the
     bottom tier indexes second, the setup's context, domain and registry last), every
-    second lift-off pose is computed there: the same values and counts, in the same
-    order, as this process alone, no process forked for them, and the helper free
-    afterwards."""
+    second lift-off pose is computed there: the same values, poses and carrier
+    candidates, in the same order, as this process alone, no process forked for them,
+    and the helper free afterwards."""
     from dataclasses import replace
 
     from ldhp_tamp import parallel, streams
@@ -290,7 +296,7 @@ def test_lift_off_values_are_the_same_with_the_solves_helper(task1_grasps, domai
     path = next(iter(pose_paths(replace(base, memo={}), plan, domain.info, REGISTRY, np.random.default_rng(0),
                                 StreamStats())))
     tip = path.segments[0]
-    alone = streams._lift_off_values(replace(base, memo={}, jobs=1), tip, S("v2-e1"))
+    alone = streams._lift_off_candidates(replace(base, memo={}, jobs=1), tip, S("v2-e1"))
     setup = replace(base, memo={}, grasps=None)  # the helper's carriers take the grasp set from its state
     helper = Helper((None, base.grasps, None, None, (setup, domain.info, REGISTRY)))
     try:
@@ -305,9 +311,9 @@ def test_lift_off_values_are_the_same_with_the_solves_helper(task1_grasps, domai
             asked.append(grasps)
             return helper
 
-        shared = streams._lift_off_values(replace(base, memo={}, helper=live), tip, S("v2-e1"))
+        shared = streams._lift_off_candidates(replace(base, memo={}, helper=live), tip, S("v2-e1"))
         assert asked == [base.grasps]  # a helper with the streams' grasp set
-        assert shared == alone and len(alone) >= 3
+        assert _same_lift_offs(shared, alone) and len(alone) >= 3
         assert helper.idle
     finally:
         helper.close()
@@ -538,3 +544,43 @@ def test_point_contacts_are_memoised_per_pose(task2) -> None:
         assert mo._point_contacts_at(ctx, p) == want and want
         ctx.memo[("point-contacts", p)] = ("sentinel",)
         assert mo._point_contacts_at(ctx, p) == ["sentinel"]  # the memo answers
+
+
+@pytest.mark.parametrize("limit", [1, 3, 6, 100])
+def test_lift_offs_rank_as_with_every_carrier_counted(task1_grasps, domain, limit, monkeypatch) -> None:
+    """The lift-off ends a stream tries first: the best ``limit`` by carriers (most
+    first), then the end's distance to the goal, then the order found, as when every
+    pose's carriers are counted; only the poses that can still rank are turned."""
+    from dataclasses import replace
+
+    from ldhp_tamp import streams
+    from ldhp_tamp.primitives.move_object import carriers
+
+    _, base = task1_grasps
+    t = Transition("tip", S("l1-e1"), S("v2-e1"))
+    plan = [t, Transition("air-move", S("v2-e1"), FREE)]
+    path = next(iter(pose_paths(replace(base, memo={}), plan, domain.info, REGISTRY, np.random.default_rng(0),
+                                StreamStats())))
+    tip = path.segments[0]
+    ctx = replace(base, memo={}, jobs=1)
+    turned = []
+    real = streams.carriers_among
+
+    def counted(c, pose, held, **kw):
+        turned.append(pose.theta)
+        return real(c, pose, held, **kw)
+
+    monkeypatch.setattr(streams, "carriers_among", counted)
+    search = streams.PathSearch(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats(), limit=limit)
+    got = [moves[-1].s1 for moves in search._lift_offs(t, [(tip,)])]
+    # every pose's carriers counted, then ranked
+    found = streams._lift_off_candidates(replace(base, memo={}, jobs=1), tip, S("v2-e1"))
+    values = [v for v, _, _ in found]
+    ranked = []
+    for i, (v, pose, _) in enumerate(found):
+        n = int(carriers(replace(base, memo={}), Pose.from_array(pose)).size)
+        if n:
+            ranked.append((-n, float(ctx.goal_distance(tip.motion.poses([v]))[0]), i, v))
+    want = [v for *_, v in sorted(ranked)[:limit]]
+    assert got == want and len(want) == min(limit, len(ranked)) >= 1
+    assert len(turned) < len(values) or limit >= len(values)
