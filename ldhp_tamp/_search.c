@@ -159,6 +159,14 @@ check(Py_buffer *b, Py_ssize_t itemsize, Py_ssize_t count, const char *name, con
     return 1;
 }
 
+/* the buffers a call got released (a buffer it did not get has no object: nothing to do) */
+static void
+release(Py_buffer **all, size_t n)
+{
+    for (size_t q = 0; q < n; q++)
+        PyBuffer_Release(all[q]);
+}
+
 /* relax() and spread() take the same arguments */
 static PyObject *
 rounds_py(PyObject *args, const char *name, int forward)
@@ -193,8 +201,7 @@ rounds_py(PyObject *args, const char *name, int forward)
     }
     result = Py_NewRef(Py_None);
 done:
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
-        PyBuffer_Release(all[q]);
+    release(all, sizeof(all) / sizeof(all[0]));
     return result;
 }
 
@@ -239,8 +246,7 @@ counting_order_py(PyObject *Py_UNUSED(self), PyObject *args)
     Py_END_ALLOW_THREADS
     result = Py_NewRef(Py_None);
 done:
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
-        PyBuffer_Release(all[q]);
+    release(all, sizeof(all) / sizeof(all[0]));
     return result;
 }
 
@@ -340,9 +346,7 @@ select_pairs_py(PyObject *Py_UNUSED(self), PyObject *args)
     }
     result = PyLong_FromSsize_t(n);
 done:
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
-        if (all[q]->obj != NULL)
-            PyBuffer_Release(all[q]);
+    release(all, sizeof(all) / sizeof(all[0]));
     return result;
 }
 
@@ -500,8 +504,7 @@ near_best_py(PyObject *Py_UNUSED(self), PyObject *args)
     }
     result = PyLong_FromSsize_t(n);
 done:
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
-        PyBuffer_Release(all[q]);
+    release(all, sizeof(all) / sizeof(all[0]));
     return result;
 }
 
@@ -619,9 +622,7 @@ slide_table_py(PyObject *Py_UNUSED(self), PyObject *args)
     }
     result = PyLong_FromSsize_t(n);
 done:
-    for (size_t q = 0; q < sizeof(all) / sizeof(all[0]); q++)
-        if (all[q]->obj != NULL)
-            PyBuffer_Release(all[q]);
+    release(all, sizeof(all) / sizeof(all[0]));
     return result;
 }
 
