@@ -546,11 +546,15 @@ def test_point_contacts_are_memoised_per_pose(task2) -> None:
         assert mo._point_contacts_at(ctx, p) == ["sentinel"]  # the memo answers
 
 
+@pytest.mark.parametrize("loose", [False, True])
 @pytest.mark.parametrize("limit", [1, 3, 6, 100])
-def test_lift_offs_rank_as_with_every_carrier_counted(task1_grasps, domain, limit, monkeypatch) -> None:
+def test_lift_offs_rank_as_with_every_carrier_counted(task1_grasps, domain, limit, loose, monkeypatch) -> None:
     """The lift-off ends a stream tries first: the best ``limit`` by carriers (most
     first), then the end's distance to the goal, then the order found, as when every
-    pose's carriers are counted; only the poses that can still rank are turned."""
+    pose's carriers are counted; only the poses that can still rank are turned. Task 1's
+    turns keep every candidate; ``loose``: a turn that keeps some of them only (from
+    none to all, by the pose), so that the candidates' counts bound the carriers'
+    loosely and the ranking must turn more poses to be sure."""
     from dataclasses import replace
 
     from ldhp_tamp import streams
@@ -566,9 +570,14 @@ def test_lift_offs_rank_as_with_every_carrier_counted(task1_grasps, domain, limi
     turned = []
     real = streams.carriers_among
 
+    def turn(c, pose, held, **kw):
+        if loose:
+            return held[:int(round(abs(pose.theta) * 1000.0)) % (held.size + 1)]
+        return real(c, pose, held, **kw)
+
     def counted(c, pose, held, **kw):
         turned.append(pose.theta)
-        return real(c, pose, held, **kw)
+        return turn(c, pose, held, **kw)
 
     monkeypatch.setattr(streams, "carriers_among", counted)
     search = streams.PathSearch(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats(), limit=limit)
@@ -577,8 +586,9 @@ def test_lift_offs_rank_as_with_every_carrier_counted(task1_grasps, domain, limi
     found = streams._lift_off_candidates(replace(base, memo={}, jobs=1), tip, S("v2-e1"))
     values = [v for v, _, _ in found]
     ranked = []
-    for i, (v, pose, _) in enumerate(found):
-        n = int(carriers(replace(base, memo={}), Pose.from_array(pose)).size)
+    for i, (v, pose, held) in enumerate(found):
+        c = replace(base, memo={})
+        n = int(turn(c, Pose.from_array(pose), held).size if loose else carriers(c, Pose.from_array(pose)).size)
         if n:
             ranked.append((-n, float(ctx.goal_distance(tip.motion.poses([v]))[0]), i, v))
     want = [v for *_, v in sorted(ranked)[:limit]]
