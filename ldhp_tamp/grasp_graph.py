@@ -68,7 +68,7 @@ from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS
 from geometry.world import GripperState, PolylineGripper, World
 from ldhp_tamp import budget
-from ldhp_tamp.kernels import SEARCH, SEARCH_API, csr  # noqa: F401  (SEARCH_API: the interface it calls)
+from ldhp_tamp.kernels import SEARCH, by_source, csr
 from ldhp_tamp.parallel import Helper, cores, two_at_a_time
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PRESS_KEY, Press, Step, Waypoint
@@ -95,7 +95,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: The compiled array passes of the search (``ldhp_tamp/_search.c``, interface
-#: ``SEARCH_API``), or ``None``: numpy computes the same arrays (:mod:`ldhp_tamp.kernels`).
+#: ``ldhp_tamp.kernels.SEARCH_API``), or ``None``: numpy computes the same arrays.
 _search = SEARCH
 
 #: mm: a pivot the judge refuses takes with it the pivots of the same finger, the same way
@@ -1234,18 +1234,8 @@ class _LayerGraph:
             none = np.zeros(0, dtype=np.int32)
             return _LayerGraph(tuple(cands), size, offsets, none, np.zeros(size + 1, dtype=np.int32), none,
                                np.zeros(0), none, none)
-        if _search is not None:  # one counting pass, the arrays taken without concatenating them
-            n = int(offsets[-1])
-            order, starts, dst, cost = (np.empty(n, np.int32), np.empty(size + 1, np.int32), np.empty(n, np.int32),
-                                        np.empty(n))
-            _search.layer_order(tuple(np.ascontiguousarray(c.edges.src, dtype=np.int64) for c in cands),
-                                tuple(np.ascontiguousarray(c.edges.dst, dtype=np.int64) for c in cands),
-                                tuple(np.ascontiguousarray(c.cost, dtype=float) for c in cands), order, starts, dst,
-                                cost)
-        else:
-            order, starts = _csr(np.concatenate([np.asarray(c.edges.src) for c in cands]), size)
-            dst = np.concatenate([np.asarray(c.edges.dst) for c in cands])[order].astype(np.int32)
-            cost = np.concatenate([np.asarray(c.cost, dtype=float) for c in cands])[order]
+        order, starts, dst, cost = by_source([c.edges.src for c in cands], [c.edges.dst for c in cands],
+                                             [c.cost for c in cands], size, _search)
         keys = np.flatnonzero(np.diff(starts)).astype(np.int32)
         return _LayerGraph(tuple(cands), size, offsets, order, starts, dst, cost, keys, starts[keys])
 

@@ -64,7 +64,7 @@ from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS, PENETRATION_TOL, WAYPOINT_STEP
 from geometry.world import PolylineGripper, TwoPointGripper, World
 from ldhp_tamp.errors import InputError
-from ldhp_tamp.kernels import SEARCH, csr
+from ldhp_tamp.kernels import SEARCH, by_source
 from ldhp_tamp.primitives.registry import REGISTRY, Family
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -463,21 +463,14 @@ class _PairTable:
     def of(parts: Sequence[tuple[IntArray, IntArray, ArrayLike, ArrayLike, FloatArray]], size: int) -> "_PairTable":
         """The table of ``parts`` ``(src, dst, sense, finger, travel)`` (a scalar sense or
         finger stands for every pair of its part) over ``size`` grasps."""
-        def column(i: int, dtype: Any) -> NDArray[Any]:
-            return np.concatenate([np.broadcast_to(np.asarray(p[i], dtype=dtype), np.shape(p[0])) for p in parts]
-                                  + [np.zeros(0, dtype)])
+        def column(i: int) -> NDArray[np.int8]:
+            return np.concatenate([np.broadcast_to(np.asarray(p[i], dtype=np.int8), np.shape(p[0])) for p in parts]
+                                  + [np.zeros(0, np.int8)])
 
-        if _search is not None and parts:  # the grasp graph's pass: sources counted, the rest taken in order
-            n = sum(int(np.shape(p[0])[0]) for p in parts)
-            order, starts, dst, travel = (np.empty(n, np.int32), np.empty(size + 1, np.int32), np.empty(n, np.int32),
-                                          np.empty(n))
-            _search.layer_order(tuple(np.ascontiguousarray(p[0], dtype=np.int64) for p in parts),
-                                tuple(np.ascontiguousarray(p[1], dtype=np.int64) for p in parts),
-                                tuple(np.ascontiguousarray(p[4], dtype=float) for p in parts), order, starts, dst, travel)
-        else:
-            order, starts = csr(column(0, np.int64), size)
-            dst, travel = column(1, np.int32)[order], column(4, float)[order]
-        return _PairTable(dst, column(2, np.int8)[order], column(3, np.int8)[order], travel, starts.astype(np.int64))
+        # the grasp graph's order of a layer's edges (ldhp_tamp.kernels.by_source)
+        order, starts, dst, travel = by_source([p[0] for p in parts], [p[1] for p in parts], [p[4] for p in parts],
+                                               size, _search)
+        return _PairTable(dst, column(2)[order], column(3)[order], travel, starts.astype(np.int64))
 
     def select(self, rows: IntArray, members: BoolArray
                ) -> tuple[IntArray, IntArray, NDArray[np.int8], NDArray[np.int8], FloatArray]:

@@ -17,6 +17,7 @@ import pytest
 
 import geometry.compiled as compiled
 import ldhp_tamp.grasp_graph as gg
+import ldhp_tamp.kernels as kernels
 import ldhp_tamp.primitives.adjust_grasp as ag
 
 search = pytest.mark.skipif(gg._search is None,
@@ -31,7 +32,7 @@ def test_the_module_is_built_where_a_compiler_is() -> None:
         pytest.skip("no C compiler: numpy computes alone")
     if os.environ.get(compiled.PURE_NUMPY_ENV, "") not in ("", "0"):
         pytest.skip(f"{compiled.PURE_NUMPY_ENV} is set: numpy computes alone")
-    assert gg._search is not None and gg._search.API == gg.SEARCH_API
+    assert gg._search is not None and gg._search.API == kernels.SEARCH_API
 
 
 @search
