@@ -52,6 +52,7 @@ __all__ = [
     "NO_CONTACT",
     "PRESS_LADDER",
     "enumerate_grasps",
+    "held_at_each",
     "pose_conditioned",
     "motion_conditioned",
     "press_forces",
@@ -1524,6 +1525,54 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     return MotionGrasps(_ro(alive, np.int64), _ro(quality, float), _ro(closure, bool), _ro(alpha, float),
                         checks, truncated, _ro(rej[by], np.int64), _ro(rat[by], np.int64), rated=rate,
                         press=None if press is None else _ro(press, float))
+
+
+def held_at_each(world: World, grasps: GraspSet, poses: ArrayLike, candidates: ArrayLike,
+                 options: MotionCheckOptions | None = None) -> list[IntArray]:
+    """``motion_conditioned(world, grasps, poses[j:j + 1], candidates, options,
+    rate=False).indices`` for every pose ``j``, the poses that touch nothing decided
+    together: the grasps of ``candidates`` that hold the object still at each pose, by
+    the gripper and gravity alone where the object touches nothing (an air-move's holds,
+    :mod:`ldhp_tamp.primitives.move_object`).
+
+    A one-pose path has no motion: no press is asked for (:func:`_leaves_it_still` and
+    :func:`_falls_away` need a moving sample), and a grasp passes iff at that pose its
+    contacts balance the weight (the cone test, per instance) and the gripper overlaps no
+    solid (per gripper pose). Both tests answer each (grasp, pose) pair on its own, by the
+    same operations whatever else is in the batch; so the poses that touch nothing (no
+    contact whose mode a path would set) are tested as one batch of pairs, and a pose that
+    touches the environment is given its own call. One call instead of one per pose: the
+    fixed cost of a call (the contacts at the path, the classes of finger contacts)
+    dominates a single pose's.
+    """
+    opts = options or MotionCheckOptions()
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    cand = np.unique(np.asarray(candidates, dtype=np.int64).reshape(-1))
+    if cand.size and (cand[0] < 0 or cand[-1] >= len(grasps)):
+        raise GeometryError(f"held_at_each: candidate indices must lie in [0, {len(grasps)})")
+    cand = cand[(cand != NO_CONTACT) & (grasps.n_touching[cand] >= 1)]
+    out: list[IntArray] = [_ro(cand[:0], np.int64)] * p.shape[0]
+    if not p.shape[0] or not cand.size:
+        return out
+    touching = contacts.contact_point_arrays(world, p, opts.contact_tol)[3].any(axis=1)
+    for j in np.flatnonzero(touching):  # the modes of a one-pose path at its contacts: its own call
+        out[j] = motion_conditioned(world, grasps, p[j:j + 1], cand, opts, rate=False).indices
+    free = np.flatnonzero(~touching)
+    if not free.size:
+        return out
+    q = p[free]
+    env = _env_contacts(world, q, opts.contact_tol)  # no contact at any of them
+    rep, of = _contact_classes(world, grasps, cand)
+    _, allc, com = _instances(world, grasps, rep, q, env, np.arange(free.size))
+    ok = mechanics.feasible_batch(allc, com, world.object.length_scale).reshape(rep.size, free.size)[of]
+    g, k = np.nonzero(ok)  # (grasp, pose) pairs that balance, grasp-major
+    if g.size:
+        wp = compose_batch(q[k], grasps.gripper[cand[g]])
+        hit = _env_overlap(world, wp, grasps.width[cand[g]], opts.tol)
+        ok[g[hit], k[hit]] = False
+    for i, j in enumerate(free):
+        out[j] = _ro(cand[ok[:, i]], np.int64)
+    return out
 
 
 def within_force_limit(world: World, grasps: GraspSet, path: ArrayLike, rows: ArrayLike, max_force: float,

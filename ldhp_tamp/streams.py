@@ -14,7 +14,6 @@ recorded, so the TAMP loop can turn them into constraints of the symbolic tier.
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 from collections import Counter
@@ -29,9 +28,8 @@ from geometry.poses import Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL
 from ldhp_tamp import budget
 from ldhp_tamp.contact_graph import PlanningContext
-from ldhp_tamp.parallel import fork_map, two_at_a_time
 from ldhp_tamp.path import Segment
-from ldhp_tamp.primitives.move_object import MARGIN_MM, carrier_candidates, carriers_among
+from ldhp_tamp.primitives.move_object import MARGIN_MM, carrier_candidates_each, carriers_among
 from ldhp_tamp.primitives.registry import DomainInfo, Family, PrimitiveRegistry, Transition
 
 log = logging.getLogger(__name__)
@@ -460,10 +458,6 @@ class PathSearch:
 
 #: Grid step (mm of vertex motion) of the lift-off poses looked at along a motion before a lift.
 LIFT_OFF_STEP_MM = 10.0
-#: Lift-off poses per core from which they are shared with the other cores by forking (a
-#: pose's carriers take a few milliseconds, a fork about ten). With the bottom tier's
-#: helper process alive they are shared from two poses on: it is forked already.
-LIFT_OFF_FORK_MIN = 6
 
 
 def _lift_off_candidates(ctx: PlanningContext, seg: Segment, state: ContactState
@@ -474,13 +468,10 @@ def _lift_off_candidates(ctx: PlanningContext, seg: Segment, state: ContactState
     of the environment there (:func:`ldhp_tamp.primitives.move_object.carrier_candidates`,
     a superset of the pose's carriers).
 
-    The poses are independent: with a live helper process whose state holds this grasp
-    set (``ctx.helper(ctx.grasps)``, idle), every second one is computed there meanwhile
-    (:func:`ldhp_tamp.parallel.two_at_a_time`, :func:`_helper_carrier_candidates`); else
-    the machine's cores take them one at a time (:func:`ldhp_tamp.parallel.fork_map`,
-    from ``LIFT_OFF_FORK_MIN`` poses a core). A fork costs this process a page fault for
-    each page it writes afterwards (``docs/benchmarks.md``, "page faults"): the helper,
-    forked in the setup, spares the solve that second fork."""
+    The poses' holds are found together and their gripper overlaps in one batch
+    (:func:`ldhp_tamp.primitives.move_object.carrier_candidates_each`): the same sets as
+    one pose at a time, in a fraction of the time (one pose's call is mostly fixed cost),
+    so they are not shared out to another process."""
     motion = seg.motion
     s_max = ctx.reach if motion.kind is MotionKind.TRANSLATE else math.pi
     sw = sweep(ctx.world, motion, s_max)
@@ -495,32 +486,8 @@ def _lift_off_candidates(ctx: PlanningContext, seg: Segment, state: ContactState
         return []
     values = np.linspace(a + margin, b - margin, n + 1)
     poses = list(motion.poses(values))
-    candidates = functools.partial(_carrier_candidates, ctx)
-    helper = ctx.helper(ctx.grasps) if ctx.helper is not None else None
-    if helper is not None and helper.idle:
-        found = two_at_a_time(helper, poses, candidates, lambda pose: (_helper_carrier_candidates, (pose,)))
-    else:
-        found = fork_map(candidates, poses, ctx.jobs, min_items_per_core=LIFT_OFF_FORK_MIN)
+    found = carrier_candidates_each(ctx, [Pose.from_array(p) for p in poses]) or [np.zeros(0, np.int64)] * len(poses)
     return [(float(value), pose, held) for value, pose, held in zip(values, poses, found) if held.size]
-
-
-def _carrier_candidates(ctx: PlanningContext, pose: np.ndarray) -> np.ndarray:
-    """The grasps that may carry the object from ``pose`` to the goal's orientation
-    (:func:`ldhp_tamp.primitives.move_object.carrier_candidates`)."""
-    found = carrier_candidates(ctx, Pose.from_array(pose))
-    return np.zeros(0, np.int64) if found is None else found
-
-
-def _helper_carrier_candidates(state: tuple[Any, ...], pose: np.ndarray) -> np.ndarray:
-    """:func:`_carrier_candidates` in the solve's helper process. Its state
-    (:meth:`ldhp_tamp.grasp_graph.GraspPlanner.start_helper`, forked in the setup of
-    :func:`ldhp_tamp.tamp.solve`) is ``(world, grasps, motion options, AdjustGrasp
-    context, (ctx, domain, registry))``: the setup's context, with the grasp set of the
-    helper's state, which is the streams' (:func:`_lift_off_candidates` asks for a helper
-    whose state holds the streams' grasp set: the enumerated set, or with the start
-    grasp's row). ``ctx.memo`` is the helper's own: what it memoises (air holders per
-    orientation, pure functions of the grasp set) stays there, as a forked child's did."""
-    return _carrier_candidates(replace(state[-1][0], grasps=state[1]), pose)
 
 
 @dataclass(eq=False)

@@ -26,7 +26,7 @@ import numpy as np
 
 from geometry.contacts import contact_points, contact_state, principal_contacts
 from geometry.collision import gripper_env_overlap
-from geometry.grasps import motion_conditioned
+from geometry.grasps import held_at_each, motion_conditioned
 from geometry.features import FREE, Contact, ContactKind, ContactState
 from geometry.kinematics import Motion, MotionKind, Sweep, SweepEnd, SweepPiece, kept_contact_holds, rotate_about, sweep, sweep_many, translate, two_contact
 from geometry.poses import Pose, wrap_angle
@@ -615,7 +615,11 @@ class AirMove:
         budget.check(ctx.deadline, where)
         lifts = [(state, _lift_witnesses(ctx, state)) for state in ctx.states
                  if not state.is_free and (state, FREE) not in pairs]
-        leaves = iter(_leave_to_free(ctx, [(w, state) for state, ws in lifts for w in ws], up))
+        ups = _leave_to_free(ctx, [(w, state) for state, ws in lifts for w in ws], up)
+        if ctx.grasps is not None:  # the holds at the orientations the lifts may be tried at, found together
+            _air_holders_of_goal_each(ctx, [w.theta for w, ok in zip((w for _, ws in lifts for w in ws), ups)
+                                            if ok and not _same_orientation(ctx, w, ctx.goal)])
+        leaves = iter(ups)
         for state, witnesses in lifts:
             budget.check(ctx.deadline, where)
             up_ok = [next(leaves) for _ in witnesses]  # the probes, swept side by side beforehand
@@ -820,6 +824,17 @@ class AirMove:
         return tuple(legs)
 
 
+def _high(ctx: PlanningContext, thetas: Sequence[float]) -> np.ndarray:
+    """Object poses (n, 3) far above the environment, where nothing else touches, at the
+    orientations ``thetas``."""
+    w = ctx.workspace
+    out = np.empty((len(thetas), 3))
+    out[:, 0] = 0.5 * (w.xmin + w.xmax)
+    out[:, 1] = w.ymax + 10.0 * ctx.reach
+    out[:, 2] = thetas
+    return out
+
+
 def _air_holders(ctx: PlanningContext, theta: float) -> np.ndarray:
     """The grasps that hold the object in the air at orientation ``theta``: the gripper
     and gravity only, the finger contacts sticking (:func:`geometry.grasps.motion_conditioned`
@@ -829,9 +844,7 @@ def _air_holders(ctx: PlanningContext, theta: float) -> np.ndarray:
     assert ctx.grasps is not None
     key = ("air-holders", round(float(wrap_angle(theta)), 9))
     if key not in ctx.memo:
-        w = ctx.workspace
-        high = np.array([[0.5 * (w.xmin + w.xmax), w.ymax + 10.0 * ctx.reach, theta]])
-        ctx.memo[key] = motion_conditioned(ctx.world, ctx.grasps, high, np.arange(len(ctx.grasps)),
+        ctx.memo[key] = motion_conditioned(ctx.world, ctx.grasps, _high(ctx, [theta]), np.arange(len(ctx.grasps)),
                                            rate=False).indices
     return ctx.memo[key]
 
@@ -841,18 +854,30 @@ def _air_holders_of_goal(ctx: PlanningContext, theta: float) -> np.ndarray:
     grasps that hold the object in the air at both orientations. Each grasp is decided on
     its own, so only the goal's holders (a few hundred of thousands of grasps) are tested
     at ``theta``, once per orientation in a solve (``ctx.memo``)."""
+    return _air_holders_of_goal_each(ctx, [theta])[0]
+
+
+def _air_holders_of_goal_each(ctx: PlanningContext, thetas: Sequence[float]) -> list[np.ndarray]:
+    """:func:`_air_holders_of_goal` of each orientation of ``thetas``, those not memoised
+    yet found in one :func:`geometry.grasps.held_at_each` call (the same sets as one
+    call each, a fraction of the time: a call's fixed cost is most of one orientation's)
+    and memoised, each at the first of ``thetas`` with its key."""
     assert ctx.grasps is not None
-    key = ("air-holders-of-goal", round(float(wrap_angle(theta)), 9))
-    if key not in ctx.memo:
+    keys = [("air-holders-of-goal", round(float(wrap_angle(theta)), 9)) for theta in thetas]
+    todo: dict[tuple[str, float], float] = {}
+    for key, theta in zip(keys, thetas):
+        if key in ctx.memo or key in todo:
+            continue
         full = ctx.memo.get(("air-holders", key[1]))
-        goal = _air_holders(ctx, ctx.goal.theta)
         if full is not None:
-            ctx.memo[key] = np.intersect1d(full, goal)
+            ctx.memo[key] = np.intersect1d(full, _air_holders(ctx, ctx.goal.theta))
         else:
-            w = ctx.workspace
-            high = np.array([[0.5 * (w.xmin + w.xmax), w.ymax + 10.0 * ctx.reach, theta]])
-            ctx.memo[key] = motion_conditioned(ctx.world, ctx.grasps, high, goal, rate=False).indices
-    return ctx.memo[key]
+            todo[key] = theta
+    if todo:
+        goal = _air_holders(ctx, ctx.goal.theta)
+        for key, held in zip(todo, held_at_each(ctx.world, ctx.grasps, _high(ctx, list(todo.values())), goal)):
+            ctx.memo[key] = held
+    return [ctx.memo[key] for key in keys]
 
 
 def _lift_witnesses(ctx: PlanningContext, state: ContactState) -> list[Pose]:
@@ -910,16 +935,27 @@ def carrier_candidates(ctx: PlanningContext, pose: Pose) -> np.ndarray | None:
     pose's orientation (and the goal's) and are clear of the environment at ``pose``, a
     superset of the carriers (the turn starts at the pose's orientation), computed
     without the turn; ``None`` without a grasp set in the context."""
+    found = carrier_candidates_each(ctx, [pose])
+    return None if found is None else found[0]
+
+
+def carrier_candidates_each(ctx: PlanningContext, poses: Sequence[Pose]) -> list[np.ndarray] | None:
+    """:func:`carrier_candidates` of each pose of ``poses``, the holds at their
+    orientations found together (:func:`_air_holders_of_goal_each`) and the gripper's
+    overlap with the environment tested in one batch of (pose, grasp) pairs: the same
+    sets as one pose at a time; ``None`` without a grasp set in the context."""
     if ctx.grasps is None:
         return None
-    if _same_orientation(ctx, pose, ctx.goal):
-        held = _air_holders(ctx, pose.theta)
-    else:
-        held = _air_holders_of_goal(ctx, pose.theta)  # held at both ends
-    if held.size:
-        grip = ctx.grasps.world_gripper(pose.as_array(), held)
-        held = held[~gripper_env_overlap(ctx.world, grip, ctx.grasps.width[held])]
-    return held
+    same = [_same_orientation(ctx, pose, ctx.goal) for pose in poses]
+    turned = iter(_air_holders_of_goal_each(ctx, [pose.theta for pose, s in zip(poses, same) if not s]))
+    # held at both ends (at the goal's orientation, the goal's holders)
+    held = [_air_holders(ctx, pose.theta) if s else next(turned) for pose, s in zip(poses, same)]
+    sizes = [h.size for h in held]
+    if not sum(sizes):
+        return held
+    grip = np.concatenate([ctx.grasps.world_gripper(pose.as_array(), h) for pose, h in zip(poses, held)])
+    clear = ~gripper_env_overlap(ctx.world, grip, ctx.grasps.width[np.concatenate(held)])
+    return [h[ok] for h, ok in zip(held, np.split(clear, np.cumsum(sizes)[:-1]))]
 
 
 def carriers_among(ctx: PlanningContext, pose: Pose, held: np.ndarray, *, first: bool = False) -> np.ndarray:

@@ -20,6 +20,7 @@ from geometry.grasps import (
     GraspSet,
     MotionCheckOptions,
     enumerate_grasps,
+    held_at_each,
     motion_conditioned,
     pose_conditioned,
     within_force_limit,
@@ -578,6 +579,40 @@ def test_motion_conditioned_edge_cases() -> None:
     # A single pose is a motionless segment: a pinch in the air holds.
     one = motion_conditioned(world, gs, path[:1], np.arange(len(gs)))
     assert len(one) > 0 and one.checks > 0
+
+
+@pytest.mark.parametrize("gripper", ["lift", "zero-mobility"])
+def test_held_at_each_is_one_pose_at_a_time(gripper: str) -> None:
+    """``held_at_each`` gives, pose by pose, what ``motion_conditioned`` of that pose alone
+    gives: in the air (decided together: the same sets, to the grasp), resting on the table
+    or standing on a corner (each pose its own call), inside the table (nothing holds it
+    clear, but touching nothing: decided with the others), for all the grasps and for a
+    subset, in the poses' order."""
+    if gripper == "lift":
+        world, gs = lift_world()
+    else:
+        world = make_world(zero_mobility())
+        gs = enumerate_grasps(world, GraspOptions(samples_per_edge=12))
+    rng = np.random.default_rng(7)
+    air = np.column_stack([rng.uniform(-50, 50, 9), np.full(9, 900.0), rng.uniform(-np.pi, np.pi, 9)])
+    rest = np.array([[0.0, 0.0, 0.0], [70.0, 0.0, math.pi / 2], tip_right(30.0)[-1]])
+    sunk = np.array([[0.0, -40.0, 0.3]])
+    poses = np.concatenate([air[:4], rest[:1], air[4:], rest[1:], sunk, air[:1]])
+    every = np.arange(len(gs))
+    some = np.flatnonzero(rng.random(len(gs)) < 0.4)
+    for cand in (every, some, np.concatenate([some, [NO_CONTACT], some[:5]])):
+        got = held_at_each(world, gs, poses, cand)
+        want = [motion_conditioned(world, gs, poses[j:j + 1], cand, rate=False).indices for j in range(len(poses))]
+        assert len(got) == len(want)
+        for g, w in zip(got, want):
+            assert g.dtype == np.int64 and np.array_equal(g, w) and not g.flags.writeable
+    touching = contacts.contact_point_arrays(world, poses)[3].any(axis=1)
+    assert touching[[4, 10, 11]].all() and not touching[[0, 1, 2, 3, 12]].any()  # both branches taken
+    assert max(len(g) for g in held_at_each(world, gs, poses[:4], every)) > 0
+    assert held_at_each(world, gs, poses[:0], every) == []
+    assert all(len(g) == 0 for g in held_at_each(world, gs, poses, [NO_CONTACT]))
+    with pytest.raises(GeometryError):
+        held_at_each(world, gs, poses, [len(gs)])
 
 
 # --------------------------------------------------------------------------------------

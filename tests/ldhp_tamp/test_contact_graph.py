@@ -252,18 +252,18 @@ def test_task1_streams_give_a_joined_path_to_the_goal(task1, domain) -> None:
             assert seg.step in (0, 1)
 
 
-def _same_lift_offs(a: list, b: list) -> bool:
-    """Two lists of ``(parameter, pose, candidates)``: the same, in the same order."""
-    return len(a) == len(b) and all(x[0] == y[0] and np.array_equal(x[1], y[1]) and np.array_equal(x[2], y[2])
-                                    for x, y in zip(a, b))
-
-
-def test_lift_off_values_are_the_same_on_the_cores(task1_grasps, domain, monkeypatch) -> None:
-    """The lift-off poses' carrier candidates, computed by the machine's cores or by this
-    process alone: the same values, poses and grasps, in the same order."""
+def test_lift_off_candidates_are_one_pose_at_a_time(task1_grasps, domain) -> None:
+    """The lift-off poses' carrier candidates, their holds found together and their
+    overlaps tested in one batch (``carrier_candidates_each``), are what each pose alone
+    gives: the grasps that hold the block in the air at the goal's orientation and at the
+    pose's (``motion_conditioned`` of one pose far above the table) and are clear of the
+    table at the pose. The same values, poses and grasps, in the same order."""
     from dataclasses import replace
 
-    from ldhp_tamp import parallel, streams
+    from geometry.collision import gripper_env_overlap
+    from geometry.grasps import motion_conditioned
+    from ldhp_tamp import streams
+    from ldhp_tamp.primitives import move_object
 
     _, base = task1_grasps
     plan = [Transition("tip", S("l1-e1"), S("v2-e1")), Transition("air-move", S("v2-e1"), FREE)]
@@ -271,52 +271,28 @@ def test_lift_off_values_are_the_same_on_the_cores(task1_grasps, domain, monkeyp
                                 StreamStats())))
     tip = path.segments[0]
     assert tip.primitive == "tip" and tip.to_state == S("v2-e1")
-    monkeypatch.setattr(parallel, "cores", lambda: 2)
-    monkeypatch.setattr(streams, "LIFT_OFF_FORK_MIN", 1)
-    shared = streams._lift_off_candidates(replace(base, memo={}), tip, S("v2-e1"))
-    monkeypatch.setattr(streams, "LIFT_OFF_FORK_MIN", 10 ** 6)
-    alone = streams._lift_off_candidates(replace(base, memo={}), tip, S("v2-e1"))
-    assert _same_lift_offs(shared, alone) and len(alone) >= 3
+    ctx = replace(base, memo={})
+    found = streams._lift_off_candidates(ctx, tip, S("v2-e1"))
+    assert len(found) >= 3
+    gs, world = base.grasps, base.world
 
+    def high(theta: float) -> np.ndarray:
+        w = base.workspace
+        return np.array([[0.5 * (w.xmin + w.xmax), w.ymax + 10.0 * base.reach, theta]])
 
-@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
-def test_lift_off_values_are_the_same_with_the_solves_helper(task1_grasps, domain, monkeypatch) -> None:
-    """With the solve's helper alive (its state as the solve forks it: the grasp set the
-    bottom tier indexes second, the setup's context, domain and registry last), every
-    second lift-off pose is computed there: the same values, poses and carrier
-    candidates, in the same order, as this process alone, no process forked for them,
-    and the helper free afterwards."""
-    from dataclasses import replace
-
-    from ldhp_tamp import parallel, streams
-    from ldhp_tamp.parallel import Helper
-
-    _, base = task1_grasps
-    plan = [Transition("tip", S("l1-e1"), S("v2-e1")), Transition("air-move", S("v2-e1"), FREE)]
-    path = next(iter(pose_paths(replace(base, memo={}), plan, domain.info, REGISTRY, np.random.default_rng(0),
-                                StreamStats())))
-    tip = path.segments[0]
-    alone = streams._lift_off_candidates(replace(base, memo={}, jobs=1), tip, S("v2-e1"))
-    setup = replace(base, memo={}, grasps=None)  # the helper's carriers take the grasp set from its state
-    helper = Helper((None, base.grasps, None, None, (setup, domain.info, REGISTRY)))
-    try:
-        def no_fork(*args: object, **kwargs: object) -> None:
-            raise AssertionError("forked for the lift-off poses beside a live helper")
-
-        monkeypatch.setattr(parallel, "cores", lambda: 2)
-        monkeypatch.setattr(streams, "fork_map", no_fork)
-        asked = []
-
-        def live(grasps=None):
-            asked.append(grasps)
-            return helper
-
-        shared = streams._lift_off_candidates(replace(base, memo={}, helper=live), tip, S("v2-e1"))
-        assert asked == [base.grasps]  # a helper with the streams' grasp set
-        assert _same_lift_offs(shared, alone) and len(alone) >= 3
-        assert helper.idle
-    finally:
-        helper.close()
+    goal = motion_conditioned(world, gs, high(base.goal.theta), np.arange(len(gs)), rate=False).indices
+    for value, pose, held in found:
+        assert np.array_equal(pose, tip.motion.poses([value])[0])
+        both = motion_conditioned(world, gs, high(pose[2]), goal, rate=False).indices
+        clear = both[~gripper_env_overlap(world, gs.world_gripper(pose, both), gs.width[both])]
+        assert held.size and np.array_equal(held, clear)
+    # one pose at a time through the memo, and again from it: the same sets
+    poses = [Pose.from_array(p) for _, p, _ in found] + [base.goal]
+    each = move_object.carrier_candidates_each(replace(base, memo={}), poses)
+    alone = [move_object.carrier_candidates(replace(base, memo={}), p) for p in poses]
+    again = move_object.carrier_candidates_each(ctx, poses)
+    assert all(np.array_equal(a, b) and np.array_equal(a, c) for a, b, c in zip(each, alone, again))
+    assert move_object.carrier_candidates_each(replace(base, grasps=None), poses) is None
 
 
 def test_task1_tip_stream_offers_an_overshoot_aligned_back(task1, domain) -> None:
