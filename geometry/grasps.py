@@ -52,6 +52,7 @@ __all__ = [
     "NO_CONTACT",
     "PRESS_LADDER",
     "enumerate_grasps",
+    "class_representatives",
     "held_at_each",
     "pose_conditioned",
     "motion_conditioned",
@@ -277,7 +278,7 @@ class GraspSet:
         """(G, 2) :meth:`contact_mu` with NaN (no contact) as 0."""
         return self._per_world(world, "finger_mu", lambda: np.nan_to_num(self.contact_mu(world)))
 
-    def _contact_classes(self, world: World) -> IntArray:
+    def contact_classes(self, world: World) -> IntArray:
         """(G,) ids of the grasps whose finger contacts are the same bit for bit (points and
         normals in the object frame, friction in ``world``, which fingers touch): their
         (grasp, sample) instances of :func:`motion_conditioned` are the same arrays, so the
@@ -1336,12 +1337,12 @@ def _instances(world: World, grasps: GraspSet, rows: IntArray, path: FloatArray,
     return fingers, allc, com.reshape(b, 2)
 
 
-def _contact_classes(world: World, grasps: GraspSet, rows: IntArray) -> tuple[IntArray, IntArray]:
-    """``rows`` by their finger contacts (:meth:`GraspSet._contact_classes`): one
+def class_representatives(world: World, grasps: GraspSet, rows: IntArray) -> tuple[IntArray, IntArray]:
+    """``rows`` by their finger contacts (:meth:`GraspSet.contact_classes`): one
     representative row per class (its first in ``rows``) and, per row, the index of its
     class's representative. The instances of a class are the same arrays bit for bit, so
     a per-instance test of the representatives, indexed by the second, answers for all."""
-    _, first, of = np.unique(grasps._contact_classes(world)[rows], return_index=True, return_inverse=True)
+    _, first, of = np.unique(grasps.contact_classes(world)[rows], return_index=True, return_inverse=True)
     return rows[first], of.reshape(-1)
 
 
@@ -1454,7 +1455,7 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
         # The quasi-static test first: it is ~10x cheaper per instance than the polyline
         # collision test and rejects most candidates.
         assert env is not None
-        rep, of = _contact_classes(world, grasps, alive)  # the same contacts, the same answer
+        rep, of = class_representatives(world, grasps, alive)  # the same contacts, the same answer
         _, allc, com = _instances(world, grasps, rep, p, env, samples)
         ok = mechanics.feasible_batch(allc, com, length).reshape(rep.size, samples.size)[of]
         checks += int(ok.size)
@@ -1496,11 +1497,11 @@ def motion_conditioned(world: World, grasps: GraspSet, path: ArrayLike, candidat
     press = None
     idle = _leaves_it_still(world, grasps, p, alive)
     if env is not None:
-        rep, of = _contact_classes(world, grasps, alive)  # both answer per instance: per class
+        rep, of = class_representatives(world, grasps, alive)  # both answer per instance: per class
         idle |= _falls_away(world, grasps, p, rep, env)[of]
     if idle.any():
         assert env is not None
-        rep, of = _contact_classes(world, grasps, alive[idle])
+        rep, of = class_representatives(world, grasps, alive[idle])
         force = press_forces(world, grasps, p, rep, env)[of]
         served = np.isfinite(force)
         rejected.append(alive[idle][~served])
@@ -1562,7 +1563,7 @@ def held_at_each(world: World, grasps: GraspSet, poses: ArrayLike, candidates: A
         return out
     q = p[free]
     env = _env_contacts(world, q, opts.contact_tol)  # no contact at any of them
-    rep, of = _contact_classes(world, grasps, cand)
+    rep, of = class_representatives(world, grasps, cand)
     _, allc, com = _instances(world, grasps, rep, q, env, np.arange(free.size))
     ok = mechanics.feasible_batch(allc, com, world.object.length_scale).reshape(rep.size, free.size)[of]
     g, k = np.nonzero(ok)  # (grasp, pose) pairs that balance, grasp-major
@@ -1845,7 +1846,7 @@ def _rating(world: World, grasps: GraspSet, p: FloatArray, alive: IntArray, env:
     order = _spread_order(p.shape[0])
     at = np.sort(order[:max(1, opts.alpha_samples)])
     length = world.object.length_scale
-    rep, of = _contact_classes(world, grasps, alive)  # the same contacts, the same rating
+    rep, of = class_representatives(world, grasps, alive)  # the same contacts, the same rating
     fingers, allc, com = _instances(world, grasps, rep, p, env, at, with_fingers=True)
     assert fingers is not None
     closure = mechanics.force_closure_batch(fingers.select(slice(None, None, at.size)), com[::at.size], length)[of]

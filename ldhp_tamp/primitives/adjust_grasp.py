@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry import collision, mechanics
 from geometry.contacts import contact_points, rests_alone
-from geometry.grasps import NO_CONTACT, FingerPart, GraspSet, row_groups
+from geometry.grasps import NO_CONTACT, FingerPart, GraspSet, class_representatives, row_groups
 from geometry.poses import BoolArray, IntArray, Pose, compose_batch, wrap_angle
 from geometry.shapes import FloatArray, segment_distances
 from geometry.tolerances import CONTACT_TOL, EPS, PENETRATION_TOL, WAYPOINT_STEP
@@ -718,6 +718,9 @@ class AdjustContext:
             value[todo & (gs.n_touching == 0)] = layer.rests_alone
             rows = np.flatnonzero(todo & (gs.n_touching >= 1))
             if rows.size:
+                # grasps with the same finger contacts (bit for bit: points, normals,
+                # friction, which touch) make the same instance: one test per class
+                every, (rows, of) = rows, class_representatives(self.world, gs, rows)
                 b = rows.size
                 ce = layer.env_points.shape[0]
                 t = layer.pose
@@ -733,8 +736,8 @@ class AdjustContext:
                     np.concatenate([np.full((b, ce), mechanics.ContactMode.STICKING, np.int8),
                                     np.where(touch, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
                                     .astype(np.int8)], axis=1))
-                value[rows] = mechanics.feasible_batch(contacts, pose_t.apply(self.world.object.com),
-                                                       self.world.object.length_scale)
+                value[every] = mechanics.feasible_batch(contacts, pose_t.apply(self.world.object.com),
+                                                        self.world.object.length_scale)[of]
             known |= todo
         out = value & want
         out.setflags(write=False)
@@ -1738,8 +1741,9 @@ class Pivot(_AdjustGrasp):
         delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
         resid = (u[ib] - u[ia]) - r * delta
         keep = (a != b) & (np.abs(delta) > ROLL_MIN_TURN) & (np.abs(resid) <= ROLL_TOL)
-        a, b, delta, resid = a[keep], b[keep], delta[keep], resid[keep]
-        rad = _turn_radius(ctx, a, k, ctx.anchors[a, k], gs.width[a]) if a.size else np.zeros(0)
+        a, b, delta, resid, ia = a[keep], b[keep], delta[keep], resid[keep], ia[keep]
+        # the radius is the source's own (about its anchor, at its width): once per contact
+        rad = _turn_radius(ctx, rows, k, ctx.anchors[rows, k], gs.width[rows])[ia] if a.size else np.zeros(0)
         hit = ctx._cache[key] = (a, b, delta, rad, resid)
         return hit
 

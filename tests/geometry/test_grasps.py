@@ -1055,8 +1055,8 @@ def test_contact_classes_group_grasps_with_the_same_instances() -> None:
     """Grasps of one class have the same finger contacts bit for bit (so the same
     (grasp, sample) instances); the representatives are each class's first row."""
     world, gs = grasp_set("polyline-palm")
-    ids = gs._contact_classes(world)
-    assert gs._contact_classes(world) is ids and ids.shape == (len(gs),)
+    ids = gs.contact_classes(world)
+    assert gs.contact_classes(world) is ids and ids.shape == (len(gs),)
     q, n, modes = gs._finger_rows
     mu = gs._finger_mu(world)
     assert np.unique(ids).size < len(gs)  # openings share contacts
@@ -1066,7 +1066,7 @@ def test_contact_classes_group_grasps_with_the_same_instances() -> None:
             assert all(x[r].tobytes() == x[rows[0]].tobytes() for r in rows)
     rng = np.random.default_rng(2)
     rows = rng.choice(np.arange(1, len(gs)), 300, replace=False)
-    rep, of = grasps_module._contact_classes(world, gs, rows)
+    rep, of = grasps_module.class_representatives(world, gs, rows)
     assert np.array_equal(ids[rep[of]], ids[rows]) and np.unique(ids[rep]).size == rep.size
     first = {}
     for r in rows:

@@ -322,6 +322,25 @@ def test_holds_among_some_grasps_decides_them_as_for_all() -> None:
     more = some | (rng.random(len(gs)) < 0.3)  # partly cached now
     assert np.array_equal(ctx.holds(pose, more), everything & more)
     assert np.array_equal(ctx.holds(pose), everything)
+    # one test per class of grasps with the same finger contacts: what every grasp's own
+    # instance answers (the environment's contacts and its fingers', all sticking), at the
+    # start (standing: every grasp) and on its corner v2 tipped 70 degrees (some grasps)
+    rows = np.flatnonzero(gs.n_touching >= 1)
+    assert np.unique(gs.contact_classes(sc.world)[rows]).size < rows.size / 2
+    for at in (pose, np.array([182.2030387935566, 65.77848345501359, -1.2217304763960293])):
+        layer, p = ctx.layer(at), Pose.from_array(at)
+        b, ce, touch = rows.size, layer.env_points.shape[0], gs.touching[rows]
+        own = mechanics.Contacts.make(
+            np.concatenate([np.broadcast_to(layer.env_points, (b, ce, 2)), p.apply(np.nan_to_num(gs.contact[rows]))], 1),
+            np.concatenate([np.broadcast_to(layer.env_normals, (b, ce, 2)),
+                            np.where(touch[..., None], p.apply_vector(np.nan_to_num(gs.normal[rows])), 0.0)], 1),
+            np.concatenate([np.broadcast_to(layer.env_mu, (b, ce)), ctx.mu[rows]], 1),
+            np.concatenate([np.full((b, ce), mechanics.ContactMode.STICKING, np.int8),
+                            np.where(touch, mechanics.ContactMode.STICKING, mechanics.ContactMode.ABSENT)
+                            .astype(np.int8)], 1))
+        want = mechanics.feasible_batch(own, p.apply(sc.world.object.com), sc.world.object.length_scale)
+        assert np.array_equal(ctx.holds(at)[rows], want) and want.any()
+    assert not want.all()
 
 
 @pytest.mark.parametrize("scenario", ["task2_slot_insertion", "task1_zero_mobility_lift"])
@@ -631,6 +650,9 @@ def test_a_round_finger_rolls_along_the_edge_it_touches(two_point: Case):
         assert (gs.feature[a, k] == gs.feature[b, k]).all() and (gs.feature[a, k] < gs.n_object).all()
         np.testing.assert_allclose(gs.arclength[b, k] - gs.arclength[a, k] - r * delta, resid, atol=1e-9)
         assert (np.abs(resid) <= ag.ROLL_TOL).all() and (np.abs(delta) > 0).all()
+        # the turn's radius is the source's own (about its kept anchor, at its width),
+        # computed once per contact: what the travel takes, to the bit
+        assert np.array_equal(rad, ag._turn_radius(ctx, a, k, ctx.anchors[a, k], gs.width[a]))
     assert found
     members = np.isin(np.arange(len(gs)), two_point.gt)
     props = ag.Pivot().propose(ctx, T0, two_point.gt, members)
