@@ -1673,8 +1673,11 @@ class Pivot(_AdjustGrasp):
             a, b, delta, centre = a[keep], b[keep], delta[keep], centre[keep]
             wa = gs.width[a]
             wb = np.where(same[keep], wa, gs.width[b])  # a pivot at one width keeps the source's
-            rad = [_turn_radius(ctx, a, k, centre, w) for w in (np.maximum(wa, wb), np.minimum(wa, wb))]
-            hit = ctx._cache[key] = (a, b, delta, rad[0], rad[1], 0.5 * np.abs(wb - wa))
+            wide = _turn_radius(ctx, a, k, centre, np.maximum(wa, wb))
+            narrow = wide.copy()  # at one width the same turn: computed where the width changes
+            change = np.flatnonzero(wb != wa)
+            narrow[change] = _turn_radius(ctx, a[change], k, centre[change], np.minimum(wa, wb)[change])
+            hit = ctx._cache[key] = (a, b, delta, wide, narrow, 0.5 * np.abs(wb - wa))
         return hit
 
     def motion(self, context: AdjustContext, pose: Pose, edges: IntraEdges) -> GripperMotion:
