@@ -787,6 +787,29 @@ class GraspPlanner:
             return seg, n_cand
         return None
 
+    def _meanwhile(self, segments: Sequence[Segment], busy: Segment) -> int:
+        """While the helper's G_m (of segment ``busy``) has not come back, the G_m of the
+        next uncached segments after it (not halves of uncached segments), here, one at
+        a time: main would otherwise wait. Returns the instances they decided. Work for a
+        path that fails before them is spent in vain, as the helper's is; their G_m stay
+        cached for the path's next plan."""
+        helper = self._helper
+        checks = 0
+        after = False
+        for seg in segments:
+            if seg is busy:
+                after = True
+                continue
+            if not after or _motion_key(seg) in self._motion_sets:
+                continue
+            if seg.parent is not None and _motion_key(seg.parent) not in self._motion_sets:
+                break  # its inputs depend on a G_m not computed yet
+            if helper is None or helper.answered():
+                break
+            mg, _, fresh = self.motion_grasps(seg, rate=False)
+            checks += mg.checks if fresh else 0
+        return checks
+
     # ---- the solve ---------------------------------------------------------------------
 
     def plan(self, path: PosePath, *, deadline: float | None = None) -> GraspPlanResult:
@@ -847,6 +870,8 @@ class GraspPlanner:
             ahead = None if _motion_key(seg) in self._motion_sets else self._motion_ahead(segments, k)
             try:
                 mg, n_cand, fresh = self.motion_grasps(seg, rate=False)
+                if ahead is not None:  # while the helper's is not back, the ones after it here
+                    checks += self._meanwhile(segments, ahead[0])
             finally:
                 if ahead is not None:  # the helper's G_m, computed meanwhile
                     assert self._helper is not None

@@ -307,6 +307,10 @@ class Helper:
         self._conn.send((fn, args))
         self._pending = True
 
+    def answered(self) -> bool:
+        """A call is pending and its answer has come (:meth:`result` will not wait)."""
+        return self._pending and self.alive and self._conn.poll()
+
     def result(self) -> R:  # type: ignore[type-var]
         """The pending call's value (its exception raised again here)."""
         if not self._pending:

@@ -391,6 +391,51 @@ def test_the_helper_process_changes_no_grasp_plan_and_ends_with_close():
     assert out[True] == out[False]
 
 
+def test_while_the_helpers_g_m_is_out_the_planner_decides_the_segments_after_it() -> None:
+    """``_meanwhile``: until the helper's answer has come (a stand-in that has it at its
+    second look), the segments after the helper's are decided here, in order: the cached
+    ones and those before the helper's skipped, a half whose parent is not decided yet
+    stopping it. Each is what it would be decided as later (the cache), and the instances
+    counted are theirs."""
+    from geometry.grasps import motion_conditioned
+
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=12))
+    pivot = world.object_vertices(sc.start)[1]
+    tip = segment(world, "tip", rotate_about(sc.start, pivot, -1), math.radians(40.0))
+    a, b = tip.split()
+    up = lift(world, tip.end, 50.0)
+    planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release, GraspGraphOptions(helper=False))
+    planner._prepare(np.asarray(tip.poses[0], dtype=float))
+
+    class Slow:
+        def __init__(self, looks: int) -> None:
+            self.looks = looks
+
+        def answered(self) -> bool:
+            self.looks -= 1
+            return self.looks < 0
+
+    from ldhp_tamp.grasp_graph import _motion_key
+
+    planner._helper = Slow(1)
+    first = lift(world, sc.start, 10.0)
+    checks = planner._meanwhile([first, tip, up, lift(world, up.end, 20.0)], busy=tip)
+    assert _motion_key(first) not in planner._motion_sets  # before the helper's: not here
+    assert _motion_key(tip) not in planner._motion_sets  # the helper's own
+    assert _motion_key(up) in planner._motion_sets and checks > 0
+    done, n_cand = planner._motion_sets[_motion_key(up)]
+    cand, _, _, _, ends = planner._motion_inputs(up)
+    alone = motion_conditioned(world, planner.grasps, up.poses, cand, planner.options.motion, rate=False, free_at=ends)
+    assert np.array_equal(done.indices, alone.indices) and checks == alone.checks
+    # the second look found the answer: the last segment is left to the loop
+    assert len(planner._motion_sets) == 1
+    planner._helper = Slow(5)
+    assert planner._meanwhile([tip, *b.split(), up], busy=tip) == 0  # halves of an undecided parent: none
+    planner._helper = None
+
+
 def test_a_helper_asked_for_by_grasp_set_holds_that_set_and_the_shared_state(monkeypatch) -> None:
     """``live_helper(grasps)``: the helper only if its state holds that very grasp set
     and the solve's shared state (``start_helper``), which every helper forked later

@@ -246,6 +246,35 @@ def test_a_helper_runs_calls_with_the_state_it_was_forked_with() -> None:
         h.submit(_add, 1)
 
 
+def _after_a_byte(state, fd):
+    return os.read(fd, 1)
+
+
+@needs_fork
+def test_a_helper_says_whether_its_answer_has_come() -> None:
+    """``answered``: False with no call pending and while the call runs (here it waits for
+    a byte this process has not written), True once the answer is there to read."""
+    import time
+
+    from ldhp_tamp.parallel import Helper
+
+    read_end, write_end = os.pipe()
+    h = Helper({"base": 40})
+    try:
+        assert not h.answered()
+        h.submit(_after_a_byte, read_end)
+        assert not h.answered() and not h.idle
+        os.write(write_end, b"x")
+        while not h.answered():
+            time.sleep(0.001)
+        assert h.result() == b"x" and not h.answered() and h.idle
+    finally:
+        h.close()
+        os.close(read_end)
+        os.close(write_end)
+    assert not h.answered()
+
+
 def _add_where(state, x):
     return state["base"] + x, os.getpid()
 
