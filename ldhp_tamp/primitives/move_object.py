@@ -33,7 +33,7 @@ from geometry.poses import Pose, wrap_angle
 from geometry.tolerances import CONTACT_TOL
 from geometry.world import PolylineGripper, TwoPointGripper, World
 from ldhp_tamp import budget
-from ldhp_tamp.parallel import fork_map, two_at_a_time
+from ldhp_tamp.parallel import fork_map, two_halves
 from ldhp_tamp.path import Segment
 from ldhp_tamp.primitives.registry import REGISTRY, Family
 
@@ -294,21 +294,22 @@ class _Swept:
 
 def _stream_sweeps(ctx: PlanningContext, jobs: list[tuple[Motion, float]]) -> list[Sweep]:
     """The streams' sweep of each (motion, s_max): memoised for the solve (a pure
-    function of them; the top-tier iterations share their first steps), every second
-    one in the live helper process the context offers (``ctx.helper``), meanwhile
-    (:func:`ldhp_tamp.parallel.two_at_a_time`)."""
+    function of them; the top-tier iterations share their first steps), walked side by
+    side (:func:`geometry.kinematics.sweep_many`: the same sweeps, a batch's calls
+    shared), every second one in the live helper process the context offers
+    (``ctx.helper``), meanwhile (:func:`ldhp_tamp.parallel.two_halves`)."""
     out: list[Sweep | None] = [ctx.memo.get(("sweep", m, s)) for m, s in jobs]
     todo = [i for i, sw in enumerate(out) if sw is None]
-    done = two_at_a_time(ctx.helper() if ctx.helper is not None else None, [jobs[i] for i in todo],
-                         lambda job: sweep(ctx.world, *job), lambda job: (_helper_sweep, job))
+    done = two_halves(ctx.helper() if ctx.helper is not None else None, [jobs[i] for i in todo],
+                      lambda part: sweep_many(ctx.world, part), lambda part: (_helper_sweeps, (list(part),)))
     for i, sw in zip(todo, done):
         out[i] = ctx.memo[("sweep", *jobs[i])] = sw
     return out  # type: ignore[return-value]
 
 
-def _helper_sweep(state: tuple[Any, ...], motion: Motion, s_max: float) -> Sweep:
-    """A stream's sweep in the helper process, whose state starts with the world."""
-    return sweep(state[0], motion, s_max)
+def _helper_sweeps(state: tuple[Any, ...], jobs: list[tuple[Motion, float]]) -> list[Sweep]:
+    """A stream's sweeps in the helper process, whose state starts with the world."""
+    return sweep_many(state[0], jobs)
 
 
 #: Where the halfway values between the goal value and an end of the interval may lie,

@@ -303,6 +303,36 @@ def test_two_at_a_time_gives_every_second_item_to_the_helper_in_order() -> None:
         h.close()
 
 
+def _add_all_where(state, xs):
+    return [(state["base"] + x, os.getpid(), len(xs)) for x in xs]
+
+
+@needs_fork
+def test_two_halves_gives_every_second_item_to_the_helper_in_one_call() -> None:
+    from ldhp_tamp.parallel import Helper, two_halves
+
+    here = lambda xs: [(40 + x, os.getpid(), len(xs)) for x in xs]  # noqa: E731
+    there = lambda xs: (_add_all_where, (list(xs),))  # noqa: E731
+    assert two_halves(None, [1, 2, 3], here, there) == [(41, os.getpid(), 3), (42, os.getpid(), 3),
+                                                         (43, os.getpid(), 3)]
+    h = Helper({"base": 40})
+    try:
+        got = two_halves(h, list(range(7)), here, there)
+        assert [v for v, _, _ in got] == [40 + x for x in range(7)]
+        assert all((pid == os.getpid()) == (i % 2 == 0) for i, (_, pid, _) in enumerate(got))
+        assert [n for _, _, n in got] == [4, 3, 4, 3, 4, 3, 4]  # one batch each
+        assert h.idle
+        assert two_halves(h, [5], here, there) == [(45, os.getpid(), 1)]  # one item: here
+
+        def fail(xs):
+            raise KeyError(xs)
+        with pytest.raises(KeyError):
+            two_halves(h, [1, 2], fail, there)
+        assert not h.alive  # its answer not wanted: closed, not waited for
+    finally:
+        h.close()
+
+
 # ---- Forked ---------------------------------------------------------------------------
 
 
