@@ -787,6 +787,34 @@ class GraspPlanner:
             return seg, n_cand
         return None
 
+    def _rate_meanwhile(self, segments: Sequence[Segment]) -> list[tuple[tuple[str, bytes], MotionGrasps]]:
+        """Send the rating of the path's unrated G_m (:func:`rate_motion_grasps`) to an idle
+        helper, which rates them while this process makes the candidate edges; returns
+        what was sent (nothing without an idle helper or an unrated set): :meth:`_rated`
+        takes the answer. A path that turns out to have no optimistic path does not need
+        the quality, and the helper's time went in vain."""
+        todo: dict[tuple[str, bytes], tuple[FloatArray, MotionGrasps]] = {}
+        for seg in segments:
+            key = _motion_key(seg)
+            hit = self._motion_sets.get(key)
+            if hit is not None and not hit[0].rated and len(hit[0]):
+                todo[key] = (np.asarray(seg.poses), hit[0])
+        helper = self._helper_process() if todo else None
+        if helper is None or not helper.idle:
+            return []
+        helper.submit(_helper_rate, list(todo.values()))
+        return [(key, mg) for key, (_, mg) in todo.items()]
+
+    def _rated(self, sent: list[tuple[tuple[str, bytes], MotionGrasps]]) -> None:
+        """Take the helper's ratings of :meth:`_rate_meanwhile` into the cache (where the
+        set is still the one sent: the same values :func:`rate_motion_grasps` gives
+        here)."""
+        assert self._helper is not None
+        for (key, mg), rated in zip(sent, self._helper.result()):
+            hit = self._motion_sets.get(key)
+            if hit is not None and hit[0] is mg:
+                self._motion_sets[key] = (rated, hit[1])
+
     def _meanwhile(self, segments: Sequence[Segment], busy: Segment) -> int:
         """While the helper's G_m (of segment ``busy``) has not come back, the G_m of the
         next uncached segments after it (not halves of uncached segments), here, one at
@@ -909,18 +937,26 @@ class GraspPlanner:
         opt = _Optimistic(layers, inter, lg, self._start_index, self.goal_release, self.options.max_intra_depth)
         reach = [np.full(size, np.inf) for _ in layers]
         t_cand = t_reach = 0.0
-        for k, layer in enumerate(layers):
-            budget.check(deadline, "the bottom tier, making the candidate AdjustGrasp edges")
-            t0 = time.perf_counter()
-            cands[k] = [self._candidates(ctx, layer, prim, search) for prim in self.primitives]
-            lg[k] = self._layer_graph(cands[k], size)
-            t1 = time.perf_counter()
-            opt.refresh([k])
-            reach[k] = opt.forward(k, k)[k][-1]
-            t_reach += time.perf_counter() - t1
-            t_cand += t1 - t0
-            if not np.isfinite(reach[k]).any():
-                break
+        rating = self._rate_meanwhile(segments)  # the grasps' quality, in the helper meanwhile
+        try:
+            for k, layer in enumerate(layers):
+                budget.check(deadline, "the bottom tier, making the candidate AdjustGrasp edges")
+                t0 = time.perf_counter()
+                cands[k] = [self._candidates(ctx, layer, prim, search) for prim in self.primitives]
+                lg[k] = self._layer_graph(cands[k], size)
+                t1 = time.perf_counter()
+                opt.refresh([k])
+                reach[k] = opt.forward(k, k)[k][-1]
+                t_reach += time.perf_counter() - t1
+                t_cand += t1 - t0
+                if not np.isfinite(reach[k]).any():
+                    break
+        except BaseException:
+            if rating:
+                self.close()  # its answer is not wanted (the next use forks another helper)
+            raise
+        if rating:
+            self._rated(rating)
         timings["candidates"] = t_cand
         t0 = time.perf_counter() - t_reach
         last = reach[-1]
@@ -1508,6 +1544,12 @@ def _helper_motion(state: tuple[Any, ...], poses: FloatArray, cand: IntArray,
     world, grasps, options = state[0], state[1], state[2]
     return motion_conditioned(world, grasps, poses, cand, options, verified=verified, recheck=recheck, rate=False,
                               free_at=ends)
+
+
+def _helper_rate(state: tuple[Any, ...], sets: list[tuple[FloatArray, MotionGrasps]]) -> list[MotionGrasps]:
+    """The helper's ratings of G_m (see :meth:`GraspPlanner._rate_meanwhile`)."""
+    world, grasps, options = state[0], state[1], state[2]
+    return [rate_motion_grasps(world, grasps, poses, mg, options) for poses, mg in sets]
 
 
 def _motion_key(seg: Segment) -> tuple[str, bytes]:

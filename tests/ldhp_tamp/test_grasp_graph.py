@@ -436,6 +436,45 @@ def test_while_the_helpers_g_m_is_out_the_planner_decides_the_segments_after_it(
     planner._helper = None
 
 
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="no os.fork on this platform")
+def test_the_helper_rates_a_paths_grasp_sets_as_this_process_would() -> None:
+    """``_rate_meanwhile`` sends a path's unrated G_m to the helper (each once), and
+    ``_rated`` caches what it sends back: the quality, closure and reaction angles that
+    ``rate_motion_grasps`` gives here, bit for bit; rated or empty sets are not sent."""
+    import dataclasses
+
+    from geometry.grasps import rate_motion_grasps
+    from ldhp_tamp.grasp_graph import _motion_key
+
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    world = sc.world
+    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=12))
+    pivot = world.object_vertices(sc.start)[1]
+    tip = segment(world, "tip", rotate_about(sc.start, pivot, -1), math.radians(40.0))
+    up = lift(world, tip.end, 50.0)
+    opts = dataclasses.replace(GraspGraphOptions(), helper=True)
+    planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release, opts)
+    try:
+        planner._prepare(np.asarray(tip.poses[0], dtype=float))
+        if planner._helper_process() is None:
+            pytest.skip("no second core")
+        sets = {seg: planner.motion_grasps(seg, rate=False)[0] for seg in (tip, up)}
+        assert all(len(m) and not m.rated for m in sets.values())
+        sent = planner._rate_meanwhile([tip, up, tip])
+        assert [key for key, _ in sent] == [_motion_key(tip), _motion_key(up)]
+        planner._rated(sent)
+        assert planner._helper.idle
+        for seg, mg in sets.items():
+            got = planner._motion_sets[_motion_key(seg)][0]
+            want = rate_motion_grasps(world, planner.grasps, seg.poses, mg, planner.options.motion)
+            assert got.rated and got is not mg
+            for field in ("indices", "quality", "force_closure", "alpha"):
+                assert np.array_equal(getattr(got, field), getattr(want, field))
+        assert planner._rate_meanwhile([tip, up]) == []  # rated now: nothing to send
+    finally:
+        planner.close()
+
+
 def test_a_helper_asked_for_by_grasp_set_holds_that_set_and_the_shared_state(monkeypatch) -> None:
     """``live_helper(grasps)``: the helper only if its state holds that very grasp set
     and the solve's shared state (``start_helper``), which every helper forked later
