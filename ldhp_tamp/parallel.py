@@ -378,22 +378,12 @@ def two_at_a_time(helper: Helper | None, items: Sequence[T], here: Callable[[T],
                   there: Callable[[T], tuple[Callable[..., R], tuple[object, ...]]]) -> list[R]:
     """``[here(x) for x in items]``, every second item computed by ``helper`` meanwhile
     (``there(x)`` is its call: a module-level function of the helper's state and its
-    arguments), all of them in one call; all here without a helper. One round trip, and
-    the two halves' times even out over the items (in pairs, each pair waits for its
-    slower half): task 1's 21 lift-off poses took 0.015 s longer in pairs. When ``here``
-    raises, the helper is closed rather than waited for (its answer is not wanted)."""
-    if helper is None or len(items) < 2:
-        return [here(x) for x in items]
-    helper.submit(_each, [there(x) for x in items[1::2]])
-    try:
-        mine = [here(x) for x in items[0::2]]
-    except BaseException:
-        helper.close()
-        raise
-    theirs: list[R] = helper.result()
-    out: list[R] = [None] * len(items)  # type: ignore[list-item]
-    out[0::2], out[1::2] = mine, theirs
-    return out
+    arguments), all of them in one call (:func:`two_halves` of the items one by one); all
+    here without a helper. One round trip, and the two halves' times even out over the
+    items (in pairs, each pair waits for its slower half). When ``here`` raises, the
+    helper is closed rather than waited for (its answer is not wanted)."""
+    return two_halves(helper, items, lambda part: [here(x) for x in part],
+                      lambda part: (_each, ([there(x) for x in part],)))
 
 
 def two_halves(helper: Helper | None, items: Sequence[T], here: Callable[[Sequence[T]], list[R]],

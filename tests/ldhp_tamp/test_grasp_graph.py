@@ -363,17 +363,23 @@ def test_a_bisected_segments_halves_get_the_grasp_sets_checking_them_from_scratc
         assert derived.checks < scratch.checks  # what the parent settled was not checked again
 
 
+def task1_tip(k: int):
+    """Task 1's scenario, its grasp set at ``k`` samples an edge and the block tipped 40
+    degrees about its bottom-right corner (a tip segment)."""
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    pivot = sc.world.object_vertices(sc.start)[1]
+    tip = segment(sc.world, "tip", rotate_about(sc.start, pivot, -1), math.radians(40.0))
+    return sc, enumerate_grasps(sc.world, GraspOptions(samples_per_edge=k)), tip
+
+
 def test_the_helper_process_changes_no_grasp_plan_and_ends_with_close():
     """G_m of two segments at once (one in a helper process) gives what one process
     gives, on a path whose refinement halves depend on their parents' G_m."""
     import dataclasses
     import os
 
-    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    sc, grasps, tip = task1_tip(20)
     world = sc.world
-    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=20))
-    pivot = world.object_vertices(sc.start)[1]
-    tip = segment(world, "tip", rotate_about(sc.start, pivot, -1), math.radians(40.0))
     a, b = tip.split()
     paths = [PosePath((tip, lift(world, tip.end, 50.0))), PosePath((*a.split(), *b.split(), lift(world, tip.end, 50.0)))]
     out = {}
@@ -399,11 +405,8 @@ def test_while_the_helpers_g_m_is_out_the_planner_decides_the_segments_after_it(
     counted are theirs."""
     from geometry.grasps import motion_conditioned
 
-    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    sc, grasps, tip = task1_tip(12)
     world = sc.world
-    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=12))
-    pivot = world.object_vertices(sc.start)[1]
-    tip = segment(world, "tip", rotate_about(sc.start, pivot, -1), math.radians(40.0))
     a, b = tip.split()
     up = lift(world, tip.end, 50.0)
     planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release, GraspGraphOptions(helper=False))
@@ -446,11 +449,8 @@ def test_the_helper_rates_a_paths_grasp_sets_as_this_process_would() -> None:
     from geometry.grasps import rate_motion_grasps
     from ldhp_tamp.grasp_graph import _motion_key
 
-    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "task1_zero_mobility_lift.toml")
+    sc, grasps, tip = task1_tip(12)
     world = sc.world
-    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=12))
-    pivot = world.object_vertices(sc.start)[1]
-    tip = segment(world, "tip", rotate_about(sc.start, pivot, -1), math.radians(40.0))
     up = lift(world, tip.end, 50.0)
     opts = dataclasses.replace(GraspGraphOptions(), helper=True)
     planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release, opts)
