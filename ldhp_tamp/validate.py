@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import logging
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
@@ -186,6 +187,20 @@ class PlanArrays:
 
     @classmethod
     def of(cls, plan: Plan) -> "PlanArrays":
+        """The plan's waypoints as arrays (read-only). The last plan's are kept: a judge
+        validates a plan and then checks its forward problem, each from its arrays."""
+        global _LAST_ARRAYS
+        last, flat = _LAST_ARRAYS
+        if last is not None and last() is plan:
+            return flat
+        flat = cls._of(plan)
+        for arr in (flat.obj, flat.grip, flat.width, flat.contacts, flat.declared, flat.step, flat.local):
+            arr.setflags(write=False)
+        _LAST_ARRAYS = (weakref.ref(plan), flat)
+        return flat
+
+    @classmethod
+    def _of(cls, plan: Plan) -> "PlanArrays":
         rows = [(i, j, w) for i, s in enumerate(plan.steps) for j, w in enumerate(s.waypoints)]
         n = len(rows)
         obj = np.array([w.object.as_array() for _, _, w in rows], dtype=float).reshape(n, 3)
@@ -212,6 +227,10 @@ class PlanArrays:
     def step_slice(self, i: int) -> slice:
         idx = np.flatnonzero(self.step == i)
         return slice(int(idx[0]), int(idx[-1]) + 1) if idx.size else slice(0, 0)
+
+
+#: The last plan :meth:`PlanArrays.of` was asked for (a weak reference) and its arrays.
+_LAST_ARRAYS: "tuple[weakref.ref[Plan] | None, PlanArrays | None]" = (None, None)
 
 
 def _runs(bad: BoolArray, step: IntArray) -> Iterator[tuple[int, int]]:
@@ -513,9 +532,24 @@ class _SupportBatch:
     com: FloatArray  # (r, 2) the world centre of mass
 
 
-def _support_batches(world: World, flat: PlanArrays) -> Iterator[_SupportBatch]:
-    """Every waypoint with a contact present, block by block (``_BLOCK`` waypoints, for
-    memory) and grouped by how many (:func:`present_groups`)."""
+#: The support batches of each plan's arrays still in use (the judge's validation and its
+#: forward problem's presses ask for the same ones).
+_BATCHES: "weakref.WeakKeyDictionary[PlanArrays, tuple[World, list[_SupportBatch]]]" = weakref.WeakKeyDictionary()
+
+
+def _support_batches(world: World, flat: PlanArrays) -> list[_SupportBatch]:
+    """:func:`_batches_of`, kept while ``flat`` is in use (its consumers read them)."""
+    hit = _BATCHES.get(flat)
+    if hit is not None and hit[0] is world:
+        return hit[1]
+    out = list(_batches_of(world, flat))
+    _BATCHES[flat] = (world, out)
+    return out
+
+
+def _batches_of(world: World, flat: PlanArrays) -> Iterator[_SupportBatch]:
+    """Every waypoint with a contact present, block by block (``_BLOCK`` waypoints) and
+    grouped by how many (:func:`present_groups`)."""
     n_wp = len(flat)
     com = transform_points(flat.obj, world.object.com)[:, 0] if n_wp else np.zeros((0, 2))
     for start in range(0, n_wp, _BLOCK):

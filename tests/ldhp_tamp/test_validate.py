@@ -68,6 +68,27 @@ def test_the_valid_example_is_valid(pick: Scenario, plan: Plan) -> None:
     assert report.contacts_checked == 2 * 22 and report.support_checks == 57
 
 
+def test_a_plans_arrays_and_support_batches_are_made_once_and_read_only(pick: Scenario, plan: Plan) -> None:
+    """The judge validates a plan and then checks its forward problem: both read the same
+    arrays (read-only) and support batches, made once for that plan object; another plan
+    object, even an equal one, gets its own; the batches are those made afresh."""
+    from ldhp_tamp.validate import PlanArrays, _batches_of, _support_batches
+
+    flat = PlanArrays.of(plan)
+    assert PlanArrays.of(plan) is flat and not flat.obj.flags.writeable and not flat.step.flags.writeable
+    other = replace(plan)
+    assert PlanArrays.of(other) is not flat and np.array_equal(PlanArrays.of(other).grip, flat.grip)
+    world = pick.world
+    made = _support_batches(world, flat)
+    assert _support_batches(world, flat) is made and len(made)
+    fresh = list(_batches_of(world, flat))
+    assert len(fresh) == len(made)
+    for a, b in zip(made, fresh):
+        assert np.array_equal(a.rows, b.rows) and np.array_equal(a.com, b.com)
+        assert np.array_equal(a.full.points, b.full.points) and np.array_equal(a.moving.modes, b.moving.modes)
+    assert validate_plan(plan, pick).valid  # the example stays valid read through the kept arrays
+
+
 def test_the_invalid_example_breaks_exactly_rules_5_and_7(pick: Scenario) -> None:
     report = validate_plan(read_plan(INVALID), pick)
     assert not report.valid and report.rules_broken == {5, 7}
