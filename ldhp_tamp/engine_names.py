@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import PurePath
 
 __all__ = ["ONESHOT_PLANNERS", "SUPPORTED_KINDS", "RecordedKind", "config_files", "installed_planners",
-           "known_planners", "recorded_kind"]
+           "installed_releases", "known_planners", "recorded_kind"]
 
 #: unified-planning's one-shot planning engines (the planners of its factory's
 #: ``DEFAULT_ENGINES``; not its anytime planners, validators or compilers) and the
@@ -131,6 +131,13 @@ def recorded_kind(engine: str) -> RecordedKind | None:
     if kind is None or engine not in (known_planners() or ()) or _release(kind.distribution) != kind.release:
         return None
     return kind
+
+
+def installed_releases() -> dict[str, str | None]:
+    """The installed release of each recorded engine's distribution (``None``: not
+    installed), read once a process (:mod:`ldhp_tamp.solver_preload` reads them before a
+    sweep's cells solve)."""
+    return {kind.distribution: _release(kind.distribution) for kind in SUPPORTED_KINDS.values()}
 
 
 @functools.cache  # the release whose code this process imports, if it imports it at all

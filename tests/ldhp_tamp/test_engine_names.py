@@ -110,6 +110,22 @@ def test_no_recorded_kind_for_another_release_or_a_configuration_file(monkeypatc
     assert recorded_kind("pyperplan") is None
 
 
+def test_the_installed_releases_are_importlib_metadatas() -> None:
+    """``installed_releases``: for each recorded engine's distribution, the installed
+    release (``None`` where it is not installed), as ``recorded_kind`` compares them."""
+    import importlib.metadata
+
+    got = engine_names.installed_releases()
+    assert set(got) == {kind.distribution for kind in engine_names.SUPPORTED_KINDS.values()}
+    for name, release in got.items():
+        try:
+            want = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            want = None
+        assert release == want
+    assert got["up-pyperplan"] is not None  # the default engine is installed
+
+
 def test_the_configuration_files_are_those_unified_planning_reads() -> None:
     from unified_planning.engines.factory import get_possible_config_locations
 
