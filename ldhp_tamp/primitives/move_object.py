@@ -825,7 +825,7 @@ class AirMove:
         return tuple(legs)
 
 
-def _high(ctx: PlanningContext, thetas: Sequence[float]) -> np.ndarray:
+def _high(ctx: PlanningContext, thetas: Sequence[float] | np.ndarray) -> np.ndarray:
     """Object poses (n, 3) far above the environment, where nothing else touches, at the
     orientations ``thetas``."""
     w = ctx.workspace
@@ -850,19 +850,15 @@ def _air_holders(ctx: PlanningContext, theta: float) -> np.ndarray:
     return ctx.memo[key]
 
 
-def _air_holders_of_goal(ctx: PlanningContext, theta: float) -> np.ndarray:
-    """``_air_holders(ctx, theta)`` among ``_air_holders(ctx, ctx.goal.theta)``: the
-    grasps that hold the object in the air at both orientations. Each grasp is decided on
-    its own, so only the goal's holders (a few hundred of thousands of grasps) are tested
-    at ``theta``, once per orientation in a solve (``ctx.memo``)."""
-    return _air_holders_of_goal_each(ctx, [theta])[0]
-
-
 def _air_holders_of_goal_each(ctx: PlanningContext, thetas: Sequence[float]) -> list[np.ndarray]:
-    """:func:`_air_holders_of_goal` of each orientation of ``thetas``, those not memoised
-    yet found in one :func:`geometry.grasps.held_at_each` call (the same sets as one
-    call each, a fraction of the time: a call's fixed cost is most of one orientation's)
-    and memoised, each at the first of ``thetas`` with its key."""
+    """For each orientation of ``thetas``, ``_air_holders(ctx, theta)`` among
+    ``_air_holders(ctx, ctx.goal.theta)``: the grasps that hold the object in the air at
+    both orientations. Each grasp is decided on its own, so only the goal's holders (a few
+    hundred of thousands of grasps) are tested at ``theta``; the orientations not memoised
+    yet (``ctx.memo``, once per orientation in a solve) in one
+    :func:`geometry.grasps.held_at_each` call (the same sets as one call each, a fraction
+    of the time: a call's fixed cost is most of one orientation's), each memoised at the
+    first of ``thetas`` with its key."""
     assert ctx.grasps is not None
     keys = [("air-holders-of-goal", round(float(wrap_angle(theta)), 9)) for theta in thetas]
     todo: dict[tuple[str, float], float] = {}
@@ -902,12 +898,7 @@ def _turn_path(ctx: PlanningContext, theta0: float, theta1: float, longer: bool)
     if longer:
         d -= math.copysign(2.0 * math.pi, d) if d != 0.0 else 0.0
     n = max(1, int(math.ceil(abs(d) / math.radians(AIR_TURN_STEP_DEG))))
-    w = ctx.workspace
-    out = np.empty((n + 1, 3))
-    out[:, 0] = 0.5 * (w.xmin + w.xmax)
-    out[:, 1] = w.ymax + 10.0 * ctx.reach
-    out[:, 2] = theta0 + np.linspace(0.0, d, n + 1)
-    return out
+    return _high(ctx, theta0 + np.linspace(0.0, d, n + 1))
 
 
 #: Candidates checked at a time along a turn when only whether one carries is asked.
