@@ -50,7 +50,7 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field, fields
 from functools import cached_property
-from typing import TYPE_CHECKING, Any, ClassVar, Mapping, Protocol, Sequence, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Iterator, Mapping, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 import shapely
@@ -1735,16 +1735,24 @@ class Pivot(_AdjustGrasp):
                                                 | (np.diff(ctx._q(gs.width[rows])) != 0))]) if rows.size else z
         reach = r * np.pi + ROLL_TOL  # the farthest a turn of at most half a circle rolls
         key_u = group * (10.0 * (gs.perimeter + reach)) + u  # groups far apart on one line
-        ia, ib = _roll_candidates(rows.size, group, u, wrap_angle(gs.gripper[rows, 2]), r,
-                                  10.0 * (gs.perimeter + 2.0 * reach + 2.0 * np.pi * r))
-        # the pairs within reach along the edge (all the rolls), in (source, target) order
-        near = (key_u[ib] >= key_u[ia] - reach) & (key_u[ib] <= key_u[ia] + reach)
-        ia, ib = ia[near], ib[near]
+        theta = gs.gripper[rows, 2]
+        found = []
+        for ia, ib in _roll_candidates(rows.size, group, u, wrap_angle(theta), r,
+                                       10.0 * (gs.perimeter + 2.0 * reach + 2.0 * np.pi * r)):
+            # the pairs within reach along the edge (all the rolls)
+            near = (key_u[ib] >= key_u[ia] - reach) & (key_u[ib] <= key_u[ia] + reach)
+            ia, ib = ia[near], ib[near]
+            delta = wrap_angle(theta[ib] - theta[ia])
+            resid = (u[ib] - u[ia]) - r * delta
+            keep = (ia != ib) & (np.abs(delta) > ROLL_MIN_TURN) & (np.abs(resid) <= ROLL_TOL)
+            found.append((ia[keep], ib[keep], delta[keep], resid[keep]))
+        ia, ib, delta, resid = (np.concatenate([f[n] for f in found] + [np.zeros(0, x.dtype)])
+                                for n, x in enumerate((z, z, np.zeros(0), np.zeros(0))))
+        # in (source, target) order, each pair once (the tests are the pair's alone, so
+        # the few that pass are ordered, not the candidates)
+        pick = _pair_order(ia, ib, rows.size)
+        ia, ib, delta, resid = ia[pick], ib[pick], delta[pick], resid[pick]
         a, b = rows[ia], rows[ib]
-        delta = wrap_angle(gs.gripper[b, 2] - gs.gripper[a, 2]) if a.size else np.zeros(0)
-        resid = (u[ib] - u[ia]) - r * delta
-        keep = (a != b) & (np.abs(delta) > ROLL_MIN_TURN) & (np.abs(resid) <= ROLL_TOL)
-        a, b, delta, resid, ia = a[keep], b[keep], delta[keep], resid[keep], ia[keep]
         # the radius is the source's own (about its anchor, at its width): once per contact
         rad = _turn_radius(ctx, rows, k, ctx.anchors[rows, k], gs.width[rows])[ia] if a.size else np.zeros(0)
         hit = ctx._cache[key] = (a, b, delta, rad, resid)
@@ -1766,10 +1774,11 @@ class Pivot(_AdjustGrasp):
 
 
 def _roll_candidates(n: int, group: IntArray, u: FloatArray, theta: FloatArray, r: float, spread: float
-                     ) -> tuple[IntArray, IntArray]:
-    """Pairs (i, j) of ``n`` contacts, sorted by i then j, that may be rolls: a superset
-    of the pairs in one group whose residual slide ``(u_j - u_i) - r wrap(theta_j -
-    theta_i)`` is within ``ROLL_TOL``.
+                     ) -> Iterator[tuple[IntArray, IntArray]]:
+    """Pairs (i, j) of ``n`` contacts that may be rolls, window by window, each window's
+    by i ascending, possibly repeated across windows (:func:`_pair_order` orders the few
+    that pass): a superset of the pairs in one group whose residual slide ``(u_j - u_i) - r
+    wrap(theta_j - theta_i)`` is within ``ROLL_TOL``.
 
     With ``v = u - r theta`` (``theta`` in [-pi, pi)) that residual is ``v_j - v_i +
     2 pi r m`` for m in {-1, 0, 1}, so j lies in one of three windows of half-width
@@ -1778,25 +1787,33 @@ def _roll_candidates(n: int, group: IntArray, u: FloatArray, theta: FloatArray, 
     ROLL_TOL`` either way) holds dozens. ``spread`` keeps the groups apart on one line.
     """
     if n == 0:
-        z = np.zeros(0, np.int64)
-        return z, z
+        return
     v = u - r * theta
     order = np.lexsort((v, group))
     key = group[order] * spread + v[order]
     half = ROLL_TOL + 1e-6
-    parts_i, parts_j = [], []
+    at = np.empty(n, np.int64)  # contact i's place in that order
+    at[order] = np.arange(n)
     for m in (-1, 0, 1):
-        centre = key - 2.0 * np.pi * r * m
+        centre = key[at] - 2.0 * np.pi * r * m
         lo = np.searchsorted(key, centre - half, side="left")
         hi = np.searchsorted(key, centre + half, side="right")
         cnt = hi - lo
+        # i ascending (a window's pairs come grouped by i: cheap to sort, _pair_order)
         i = np.repeat(np.arange(n), cnt)
         j = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(int(cnt.sum()))
-        parts_i.append(order[i])
-        parts_j.append(order[j])
-    pair = np.sort(np.concatenate(parts_i) * n + np.concatenate(parts_j))
-    pair = pair[np.concatenate([[True], pair[1:] != pair[:-1]])]  # windows meet when r is tiny
-    return pair // n, pair % n
+        yield i, order[j]
+
+
+def _pair_order(i: IntArray, j: IntArray, n: int) -> IntArray:
+    """The positions of the pairs ``(i, j)`` (indices below ``n``) sorted by i then j,
+    each pair's first only (the windows of :func:`_roll_candidates` meet when the radius
+    is tiny)."""
+    if i.size == 0:
+        return np.zeros(0, np.int64)
+    pos = np.argsort(i * n + j, kind="stable")
+    pair = (i * n + j)[pos]
+    return pos[np.concatenate([[True], pair[1:] != pair[:-1]])]
 
 
 #: ``IntraEdges.sense`` of a rolling pivot (times the sign of its turn).
