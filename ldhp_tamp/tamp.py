@@ -41,7 +41,7 @@ from ldhp_tamp.domain_info import DomainActions, read_domain_actions
 from ldhp_tamp.errors import DomainError, TimeBudgetExceeded
 from ldhp_tamp.executability import forward_check
 from ldhp_tamp.grasp_graph import GraspGraphOptions, GraspPlanner, GraspPlanResult, GraspPlanStatus
-from ldhp_tamp.parallel import Helper
+from ldhp_tamp.parallel import Forked, Helper
 from ldhp_tamp.path import Segment
 from ldhp_tamp.plan import PLAN_FORMAT as FORMAT, Failure, FailureCause, FailureTier, Plan, PlanStats, PlanStatus, Step
 from ldhp_tamp.primitives import REGISTRY, Family
@@ -363,18 +363,28 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
     if settings.friction_margin > 0:
         world = replace(world, friction=world.friction.scaled(1.0 - settings.friction_margin))
 
-    try:
-        ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples,
-                            deadline=deadline)
-    except ContactPoseError as exc:
-        load_domain()  # a domain that does not load is what is reported (exit status 2)
-        text = f"top tier, step 1: {exc}"
-        return _failed(scenario, engine, _Attempt(text, FailureTier.SETUP, FailureCause.NO_CONTACT_POSE,
-                                                  what=_short(text)), c, clock)
-    c.contact_state_nodes = len(ctx.states)
-    budget.check(deadline, "the setup (contact states)")
+    # The candidate grasps and the contact states depend on the world alone: with helpers
+    # (and a second core), a child forked now enumerates the grasps while this process
+    # enumerates the contact states, and sends the grasp set back (numpy arrays, 1 MB for
+    # task 1). Short-lived, it ends before the bottom tier's helper is forked.
     offsets = tuple(float(u) for u in grasp_rng.uniform(*EDGE_OFFSET_RANGE, size=world.object.n))
-    grasps = enumerate_grasps(world, GraspOptions(samples_per_edge=k_samples, edge_offsets=offsets))
+    grasp_options = GraspOptions(samples_per_edge=k_samples, edge_offsets=offsets)
+    enumerated = Forked(enumerate_grasps, world, grasp_options) if options.helpers else None
+    try:
+        try:
+            ctx = build_context(world, scenario.start, scenario.goal, stream_samples=options.stream_samples,
+                                deadline=deadline)
+        except ContactPoseError as exc:
+            load_domain()  # a domain that does not load is what is reported (exit status 2)
+            text = f"top tier, step 1: {exc}"
+            return _failed(scenario, engine, _Attempt(text, FailureTier.SETUP, FailureCause.NO_CONTACT_POSE,
+                                                      what=_short(text)), c, clock)
+        c.contact_state_nodes = len(ctx.states)
+        budget.check(deadline, "the setup (contact states)")
+        grasps = enumerate_grasps(world, grasp_options) if enumerated is None else enumerated.result()
+    finally:
+        if enumerated is not None:
+            enumerated.close()  # (nothing to do once its result is taken)
     budget.check(deadline, "the setup (grasp enumeration)")
     ctx = replace(ctx, grasps=grasps)  # air-move lifts and placements need a carrying grasp
 

@@ -509,22 +509,29 @@ def test_the_domain_is_loaded_while_the_transitions_are_computed(pick_result, mo
 def test_the_solve_forks_its_helper_once_in_the_setup(pick_result, monkeypatch) -> None:
     """The transitions are computed by the bottom tier's helper, forked in the setup: the
     solve forks no other long-lived process (a fork costs the solve a page fault for each
-    page it writes afterwards), and the plan is the same."""
+    page it writes afterwards), only, before the helper, a child that enumerates the
+    grasps while the solve enumerates the contact states; and the plan is the same."""
     from ldhp_tamp import grasp_graph, parallel
 
     monkeypatch.setattr(parallel, "cores", lambda: 2)
     monkeypatch.setattr(grasp_graph, "cores", lambda: 2)
     made = []
     real = parallel.Helper.__init__
+    real_forked = parallel.Forked.__init__
 
     def init(self, state):
-        made.append(len(state))
+        made.append(("helper", len(state)))
         real(self, state)
 
+    def forked(self, fn, *args):
+        made.append(("forked", fn.__name__))
+        real_forked(self, fn, *args)
+
     monkeypatch.setattr(parallel.Helper, "__init__", init)
-    monkeypatch.setattr(parallel.Forked, "__init__", lambda *a: pytest.fail("a process forked for the transitions"))
+    monkeypatch.setattr(parallel.Forked, "__init__", forked)
     res = solve(load_scenario(PICK))
-    assert made == [5]  # (world, grasps, motion options, context, the setup's (ctx, domain, registry))
+    # the helper's state: (world, grasps, motion options, context, the setup's (ctx, domain, registry))
+    assert made == [("forked", "enumerate_grasps"), ("helper", 5)]
     assert [w for s in res.plan.steps for w in s.waypoints] == [w for s in pick_result.plan.steps for w in s.waypoints]
 
 
