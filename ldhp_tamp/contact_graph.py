@@ -159,14 +159,20 @@ class PlanningContext:
 
     def witness_poses(self, state: ContactState) -> tuple[Pose, ...]:
         """Witness poses of ``state`` (the Step-1 contact poses count as witnesses)."""
-        out: list[Pose] = []
+        return self._witness_poses.get(state, ())
+
+    @cached_property
+    def _witness_poses(self) -> dict[ContactState, tuple[Pose, ...]]:
+        """:meth:`witness_poses` of every state that has one: the start's contact pose,
+        the goal's, then the witnesses' (``transition_witnesses`` of each), in that order.
+        (One pass: the setup and the streams ask for every state's, and comparing two
+        states compares their contacts.)"""
+        out: dict[ContactState, list[Pose]] = {}
         for c in (self.start_contact, self.goal_contact):
-            if c.state == state:
-                out.append(c.pose)
+            out.setdefault(c.state, []).append(c.pose)
         for w in self.witnesses:
-            if w.state == state:
-                out.extend(w.witnesses[: self.transition_witnesses])
-        return tuple(out)
+            out.setdefault(w.state, []).extend(w.witnesses[: self.transition_witnesses])
+        return {s: tuple(p) for s, p in out.items()}
 
     def goal_distance(self, poses: np.ndarray) -> np.ndarray:
         """Heuristic distance (mm) of poses (n, 3) to the goal contact pose T'_g:
