@@ -175,6 +175,27 @@ def test_the_problem_vocabulary_is_required():
         load_domain(DATA / "no-hand-free.pddl")
 
 
+def test_the_pddl_readers_warm_up_streamlines_its_grammars_and_changes_no_parse():
+    """prepare_pddl_reader (a sweep worker's preload) parses a small domain and problem,
+    so that pyparsing streamlines the grammars then and not in a cell's first parse (in
+    a fresh interpreter: this one's have parsed already); the project's domain reads the
+    same after it."""
+    import subprocess
+    import sys
+
+    code = ("from ldhp_tamp import symbolic as s; r = s._reader(s._environment()); "
+            "g = (r._pp_domain, r._pp_problem, r._pp_parameters); print([e.streamlined for e in g]); "
+            "s.prepare_pddl_reader(); print([e.streamlined for e in g])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split("\n")[:2] == ["[False, False, False]", "[True, True, True]"]
+    text = (domains_dir() / "ldhp.pddl").read_text()
+    before = parse_domain(text, "ldhp.pddl").info
+    from ldhp_tamp import symbolic
+
+    symbolic.prepare_pddl_reader()
+    assert parse_domain(text, "ldhp.pddl").info == before
+
+
 def test_an_action_changing_a_static_predicate_is_refused():
     text = (domains_dir() / "ldhp.pddl").read_text()
     text = text.replace("(and (touching) (not (hand-free)))",
