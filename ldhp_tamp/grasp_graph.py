@@ -78,6 +78,7 @@ from ldhp_tamp.primitives.adjust_grasp import (
     CheckFailure,
     CheckResult,
     IntraEdges,
+    LayerData,
     LazyAdjustGrasp,
     motion_waypoints,
 )
@@ -815,6 +816,30 @@ class GraspPlanner:
             if hit is not None and hit[0] is mg:
                 self._motion_sets[key] = (rated, hit[1])
 
+    def _layers_meanwhile(self, ctx: AdjustContext, layers: Sequence[_Layer]) -> list[int]:
+        """Send the layers after the first whose intra-pose ends (:attr:`_Layer.intra`, the
+        :meth:`AdjustContext.holds` of G_T) are not decided yet and whose candidates are
+        not cached to an idle helper, which decides them (with each pose's
+        :class:`LayerData`) while this process makes layer 0's candidates; returns those
+        layers' indices (none without an idle helper or such a layer): :meth:`_layers_taken`
+        takes the answer."""
+        todo = [k for k, layer in enumerate(layers) if k > 0
+                and not all((layer.key, prim.name, False) in self._cands for prim in self.primitives)
+                and not ctx.holds_known(layer.pose, layer.members)]
+        helper = self._helper_process() if todo else None
+        if helper is None or not helper.idle:
+            return []
+        helper.submit(_helper_layers, [(layers[k].pose, layers[k].members) for k in todo])
+        return todo
+
+    def _layers_taken(self, ctx: AdjustContext, sent: list[int]) -> None:
+        """Take the helper's answer to :meth:`_layers_meanwhile` into the context's caches
+        (the same values :meth:`AdjustContext.holds` and :meth:`AdjustContext.layer` give
+        here: every instance is decided by the same operations)."""
+        assert self._helper is not None
+        for data, decided, held in self._helper.result():
+            ctx.take_holds(data, decided, held)
+
     def _meanwhile(self, segments: Sequence[Segment], busy: Segment) -> int:
         """While the helper's G_m (of segment ``busy``) has not come back, the G_m of the
         next uncached segments after it (not halves of uncached segments), here, one at
@@ -937,10 +962,17 @@ class GraspPlanner:
         opt = _Optimistic(layers, inter, lg, self._start_index, self.goal_release, self.options.max_intra_depth)
         reach = [np.full(size, np.inf) for _ in layers]
         t_cand = t_reach = 0.0
-        rating = self._rate_meanwhile(segments)  # the grasps' quality, in the helper meanwhile
+        # The helper decides the later layers' intra-pose ends while this process makes
+        # layer 0's candidates, then rates the grasps' quality while it makes the rest.
+        ahead = self._layers_meanwhile(ctx, layers)
+        rating = [] if ahead else self._rate_meanwhile(segments)
         try:
             for k, layer in enumerate(layers):
                 budget.check(deadline, "the bottom tier, making the candidate AdjustGrasp edges")
+                if ahead and k == ahead[0]:
+                    self._layers_taken(ctx, ahead)
+                    ahead = []
+                    rating = self._rate_meanwhile(segments)
                 t0 = time.perf_counter()
                 cands[k] = [self._candidates(ctx, layer, prim, search) for prim in self.primitives]
                 lg[k] = self._layer_graph(cands[k], size)
@@ -952,9 +984,11 @@ class GraspPlanner:
                 if not np.isfinite(reach[k]).any():
                     break
         except BaseException:
-            if rating:
+            if rating or ahead:
                 self.close()  # its answer is not wanted (the next use forks another helper)
             raise
+        if ahead:  # the layers' forward reachability died before them: taken for the cache
+            self._layers_taken(ctx, ahead)
         if rating:
             self._rated(rating)
         timings["candidates"] = t_cand
@@ -1544,6 +1578,15 @@ def _helper_motion(state: tuple[Any, ...], poses: FloatArray, cand: IntArray,
     world, grasps, options = state[0], state[1], state[2]
     return motion_conditioned(world, grasps, poses, cand, options, verified=verified, recheck=recheck, rate=False,
                               free_at=ends)
+
+
+def _helper_layers(state: tuple[Any, ...], layers: list[tuple[FloatArray, BoolArray]]
+                   ) -> list[tuple[LayerData, BoolArray, BoolArray]]:
+    """The helper's intra-pose ends of layers (see :meth:`GraspPlanner._layers_meanwhile`):
+    each pose's :class:`LayerData`, the grasps decided (G_T) and which of them hold the
+    object still, with its copy of the primitives' context."""
+    ctx: AdjustContext = state[3]
+    return [(ctx.layer(pose), members, ctx.holds(pose, members)) for pose, members in layers]
 
 
 def _helper_rate(state: tuple[Any, ...], sets: list[tuple[FloatArray, MotionGrasps]]) -> list[MotionGrasps]:

@@ -743,6 +743,28 @@ class AdjustContext:
         out.setflags(write=False)
         return out
 
+    def holds_known(self, pose: Pose | ArrayLike, among: BoolArray) -> bool:
+        """Whether :meth:`holds` has decided every grasp of ``among`` at ``pose`` (it
+        would compute nothing)."""
+        p = pose.as_array() if isinstance(pose, Pose) else np.asarray(pose, dtype=float).reshape(3)
+        hit = self._cache.get(("holds", p.tobytes()))
+        return hit is not None and not (np.asarray(among, dtype=bool) & ~hit[0]).any()
+
+    def take_holds(self, layer: LayerData, decided: BoolArray, held: BoolArray) -> None:
+        """Take what another process's copy of this context found at ``layer.pose``: its
+        :class:`LayerData`, and :meth:`holds` of the grasps ``decided`` (``held``), for
+        the grasps not decided here yet (both decide an instance by the same operations,
+        so the values agree)."""
+        self._cache.setdefault(("layer", layer.pose.tobytes()), layer)
+        hit = self._cache.get(("holds", layer.pose.tobytes()))
+        if hit is None:
+            hit = self._cache[("holds", layer.pose.tobytes())] = (np.zeros(len(self.grasps), dtype=bool),
+                                                                 np.zeros(len(self.grasps), dtype=bool))
+        known, value = hit
+        new = np.asarray(decided, dtype=bool) & ~known
+        value[new] = np.asarray(held, dtype=bool)[new]
+        known |= new
+
     def cache(self, name: str, pose: FloatArray) -> dict[Any, Any]:
         """A per-pose memo shared by primitives (e.g. approach/open route validity)."""
         return self._cache.setdefault((name, np.asarray(pose, dtype=float).tobytes()), {})

@@ -475,6 +475,52 @@ def test_the_helper_rates_a_paths_grasp_sets_as_this_process_would() -> None:
         planner.close()
 
 
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="no os.fork on this platform")
+def test_the_helper_decides_later_layers_intra_pose_ends_as_this_process_would() -> None:
+    """``_layers_meanwhile`` sends the layers after the first whose ``holds`` of G_T is
+    not decided yet to the helper; ``_layers_taken`` puts its answer into the context's
+    caches: the LayerData and ``holds`` that this process computes, bit for bit, and
+    nothing is sent again once they are known."""
+    import dataclasses
+
+    from ldhp_tamp.grasp_graph import _Layer
+    from ldhp_tamp.primitives.adjust_grasp import AdjustContext
+
+    sc, grasps, tip = task1_tip(12)
+    world = sc.world
+    up = lift(world, tip.end, 50.0)
+    opts = dataclasses.replace(GraspGraphOptions(), helper=True)
+    planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release, opts)
+    try:
+        planner._prepare(np.asarray(tip.poses[0], dtype=float))
+        if planner._helper_process() is None:
+            pytest.skip("no second core")
+        ctx = planner.context
+        poses = [np.asarray(tip.poses[0], dtype=float), np.asarray(tip.end.as_array(), dtype=float),
+                 np.asarray(up.end.as_array(), dtype=float)]
+        layers = []
+        for k, p in enumerate(poses):
+            members = np.zeros(len(planner.grasps), dtype=bool)
+            members[planner.pose_grasps(p)] = True
+            layers.append(_Layer(k, p, p.tobytes(), members, int(members.sum()), "s",
+                                 lambda p=p, m=members: ctx.holds(p, m)))
+        sent = planner._layers_meanwhile(ctx, layers)
+        assert sent == [1, 2]  # not the first: this process makes its candidates meanwhile
+        planner._layers_taken(ctx, sent)
+        assert planner._helper.idle
+        fresh = AdjustContext(world, planner.grasps, planner.options.adjust)
+        for layer in layers[1:]:
+            assert ctx.holds_known(layer.pose, layer.members)
+            assert np.array_equal(ctx.holds(layer.pose, layer.members), fresh.holds(layer.pose, layer.members))
+            got, want = ctx.layer(layer.pose), fresh.layer(layer.pose)
+            for field in dataclasses.fields(want):
+                assert np.array_equal(getattr(got, field.name), getattr(want, field.name))
+        assert not ctx.holds_known(layers[0].pose, layers[0].members)
+        assert planner._layers_meanwhile(ctx, layers) == []  # known now: nothing to send
+    finally:
+        planner.close()
+
+
 def test_a_helper_asked_for_by_grasp_set_holds_that_set_and_the_shared_state(monkeypatch) -> None:
     """``live_helper(grasps)``: the helper only if its state holds that very grasp set
     and the solve's shared state (``start_helper``), which every helper forked later
