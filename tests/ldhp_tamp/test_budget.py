@@ -388,10 +388,18 @@ def _assert_timed_out(result, timeout: float) -> None:
     assert result.plan.stats.time_s["total"] >= timeout
 
 
-def test_a_budget_shorter_than_the_setup_fails_in_it(fake_clock: FakeClock, monkeypatch) -> None:
-    # the budget runs out while the grasps are enumerated: the check after them says so
-    advance_on_entry(monkeypatch, tamp, "enumerate_grasps", fake_clock, 1e-3)
-    result = solve(load_scenario(PICK), SolveOptions(timeout=1e-3))
+@pytest.mark.parametrize("helpers", [False, True])
+def test_a_budget_shorter_than_the_setup_fails_in_it(fake_clock: FakeClock, monkeypatch, helpers: bool) -> None:
+    # the budget runs out while the grasps are enumerated: the check after them says so.
+    # With helpers a forked child enumerates them (its clock moves on in the child): the
+    # clock moves on here as the solve waits for the child's grasp set.
+    from ldhp_tamp import parallel
+
+    if helpers:
+        advance_on_entry(monkeypatch, parallel.Forked, "result", fake_clock, 1e-3)
+    else:
+        advance_on_entry(monkeypatch, tamp, "enumerate_grasps", fake_clock, 1e-3)
+    result = solve(load_scenario(PICK), SolveOptions(timeout=1e-3, helpers=helpers))
     _assert_timed_out(result, 1e-3)
     assert result.reason.startswith("timeout: the 0.001 s budget ran out in the setup (grasp enumeration)")
     assert result.plan.stats.contact_state_nodes > 0  # what was gathered so far
