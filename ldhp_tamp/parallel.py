@@ -35,7 +35,7 @@ from typing import Callable, Generic, Iterator, Sequence, TypeVar
 
 from ldhp_tamp.errors import TimeBudgetExceeded
 
-__all__ = ["Forked", "Helper", "cores", "fork_map", "two_at_a_time"]
+__all__ = ["Forked", "Helper", "cores", "fork_map", "reap", "two_at_a_time"]
 
 log = logging.getLogger(__name__)
 
@@ -173,8 +173,8 @@ def _answer(message: tuple[str, object], who: str) -> object:
 
 
 def _collect(pid: int, read_end: int) -> list[tuple[int, R]]:
-    """Read a :func:`fork_map` child's pickled answer to the end, reap it, return its
-    results or raise."""
+    """Read a :func:`fork_map` child's pickled answer to the end, reap it (or leave it
+    to :func:`reap` while it ends), return its results or raise."""
     payload = _answer_of(pid, read_end, "a worker process of the solve")
     assert isinstance(payload, list)
     return payload
@@ -182,7 +182,11 @@ def _collect(pid: int, read_end: int) -> list[tuple[int, R]]:
 
 def _answer_of(pid: int, read_end: int, who: str) -> object:
     """Read a child's pickled :func:`_outcome` to the end, reap the child (killed first
-    if the read was interrupted), return its value or raise its error."""
+    if the read was interrupted), return its value or raise its error.
+
+    A child that sent its whole answer is reaped later (:func:`reap`) if it has not
+    exited yet: the end of a forked copy of a large process (its pages unmapped) takes
+    15-20 ms here, which the caller need not wait for."""
     chunks = []
     done = False
     try:
@@ -194,10 +198,37 @@ def _answer_of(pid: int, read_end: int, who: str) -> object:
         if not done:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
-        _, status = os.waitpid(pid, 0)
+        if done and chunks:
+            _reap_later(pid)
+        else:
+            _, status = os.waitpid(pid, 0)
     if not chunks:
         raise RuntimeError(f"{who} died (wait status {status})")
     return _answer(pickle.loads(b"".join(chunks)), who)
+
+
+#: Children that sent their whole answer and had not exited when it was read: reaped by
+#: :func:`reap` (the solve at its end, the helper while it waits for a call).
+_UNREAPED: list[int] = []
+
+
+def _reap_later(pid: int) -> None:
+    """Reap ``pid`` if it has exited, else leave it to :func:`reap`."""
+    with contextlib.suppress(ChildProcessError):
+        if os.waitpid(pid, os.WNOHANG)[0] == 0:
+            _UNREAPED.append(pid)
+
+
+def reap(block: bool = True) -> None:
+    """Reap the children whose answers came before they exited (waiting for them with
+    ``block``; they are ending: their answer is sent, their pipe closed)."""
+    for pid in list(_UNREAPED):
+        try:
+            finished = os.waitpid(pid, 0 if block else os.WNOHANG)[0] != 0
+        except ChildProcessError:  # reaped already
+            finished = True
+        if finished:
+            _UNREAPED.remove(pid)
 
 
 class Forked(Generic[R]):
@@ -364,10 +395,15 @@ def _alarm_held() -> Iterator[None]:
 
 
 def _serve(conn: object, state: object) -> None:
-    """The helper child's loop: run each call received, send back its value or error."""
+    """The helper child's loop: run each call received, send back its value or error.
+    The children a call forked that were still ending when it took their answers are
+    reaped while no call waits (:func:`reap`, looking every 2 ms): a call is never kept
+    waiting for their end."""
     signal.signal(signal.SIGALRM, signal.SIG_DFL)
     while True:
         try:
+            while _UNREAPED and not conn.poll(0.002):  # type: ignore[attr-defined]
+                reap(block=False)
             fn, args = conn.recv()  # type: ignore[attr-defined]
         except (EOFError, OSError):
             return

@@ -34,7 +34,7 @@ from geometry.kinematics import dense_parameters
 from geometry.shapes import FloatArray
 from geometry.tolerances import WAYPOINT_STEP
 from geometry.world import World
-from ldhp_tamp import budget, symbolic
+from ldhp_tamp import budget, parallel, symbolic
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.contact_graph import ContactPoseError, admissible_transitions, build_context, relevant_states
 from ldhp_tamp.domain_info import DomainActions, read_domain_actions
@@ -315,7 +315,11 @@ def solve(scenario: Scenario, options: SolveOptions = SolveOptions(),
     deadline = Budget(options.timeout, clock.start).deadline
     try:
         with budget.alarm(deadline):
-            return _solve(scenario, options, progress, c, clock, deadline)
+            try:
+                return _solve(scenario, options, progress, c, clock, deadline)
+            finally:  # the forked children whose answers came as they ended: none outlives the solve
+                with contextlib.suppress(TimeBudgetExceeded):
+                    parallel.reap()
     except TimeBudgetExceeded as exc:
         if c.top_iterations == 0:
             clock.setup = budget.clock() - clock.start

@@ -506,6 +506,35 @@ def test_the_domain_is_loaded_while_the_transitions_are_computed(pick_result, mo
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+@pytest.mark.skipif(not hasattr(os, "fork") or not os.path.isdir("/proc"), reason="needs os.fork and /proc")
+def test_a_solve_leaves_no_child_behind(monkeypatch) -> None:
+    """The children a solve forks (the grasps' child, the helper, the helper's own) are
+    all ended and reaped when it returns, zombies included: a child whose answer came
+    before it ended is reaped at the solve's end (``parallel.reap``)."""
+    from ldhp_tamp import grasp_graph, parallel
+
+    monkeypatch.setattr(parallel, "cores", lambda: 2)
+    monkeypatch.setattr(grasp_graph, "cores", lambda: 2)
+
+    def children() -> set[int]:
+        me, out = os.getpid(), set()
+        for pid in os.listdir("/proc"):
+            if pid.isdigit():
+                try:
+                    with open(f"/proc/{pid}/stat") as f:
+                        fields = f.read().rsplit(")", 1)[1].split()
+                except OSError:
+                    continue
+                if int(fields[1]) == me:
+                    out.add(int(pid))
+        return out
+
+    parallel.reap()
+    before = children()
+    assert solve(load_scenario(PICK)).status is SolveStatus.SOLVED
+    assert children() <= before and not parallel._UNREAPED
+
+
 def test_the_solve_forks_its_helper_once_in_the_setup(pick_result, monkeypatch) -> None:
     """The transitions are computed by the bottom tier's helper, forked in the setup: the
     solve forks no other long-lived process (a fork costs the solve a page fault for each
