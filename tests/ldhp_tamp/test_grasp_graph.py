@@ -8,8 +8,12 @@ every solve well under a second. Solved plans are checked by the plan validator.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import math
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -439,25 +443,33 @@ def test_while_the_helpers_g_m_is_out_the_planner_decides_the_segments_after_it(
     planner._helper = None
 
 
+@contextlib.contextmanager
+def _with_helper(k: int = 12) -> Iterator[tuple[Any, GraspPlanner, Any, Any]]:
+    """Task 1's tip (K = ``k``) and a lift after it, with a planner whose helper process
+    is running (the test is skipped on one core); the helper is closed after."""
+    sc, grasps, tip = task1_tip(k)
+    up = lift(sc.world, tip.end, 50.0)
+    opts = dataclasses.replace(GraspGraphOptions(), helper=True)
+    planner = GraspPlanner(sc.world, grasps, bindings(), sc.start_grasp, sc.goal_release, opts)
+    try:
+        planner._prepare(np.asarray(tip.poses[0], dtype=float))
+        if planner._helper_process() is None:
+            pytest.skip("no second core")
+        yield sc, planner, tip, up
+    finally:
+        planner.close()
+
+
 @pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="no os.fork on this platform")
 def test_the_helper_rates_a_paths_grasp_sets_as_this_process_would() -> None:
     """``_rate_meanwhile`` sends a path's unrated G_m to the helper (each once), and
     ``_rated`` caches what it sends back: the quality, closure and reaction angles that
     ``rate_motion_grasps`` gives here, bit for bit; rated or empty sets are not sent."""
-    import dataclasses
-
     from geometry.grasps import rate_motion_grasps
     from ldhp_tamp.grasp_graph import _motion_key
 
-    sc, grasps, tip = task1_tip(12)
-    world = sc.world
-    up = lift(world, tip.end, 50.0)
-    opts = dataclasses.replace(GraspGraphOptions(), helper=True)
-    planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release, opts)
-    try:
-        planner._prepare(np.asarray(tip.poses[0], dtype=float))
-        if planner._helper_process() is None:
-            pytest.skip("no second core")
+    with _with_helper() as (sc, planner, tip, up):
+        world = sc.world
         sets = {seg: planner.motion_grasps(seg, rate=False)[0] for seg in (tip, up)}
         assert all(len(m) and not m.rated for m in sets.values())
         sent = planner._rate_meanwhile([tip, up, tip])
@@ -471,8 +483,6 @@ def test_the_helper_rates_a_paths_grasp_sets_as_this_process_would() -> None:
             for field in ("indices", "quality", "force_closure", "alpha"):
                 assert np.array_equal(getattr(got, field), getattr(want, field))
         assert planner._rate_meanwhile([tip, up]) == []  # rated now: nothing to send
-    finally:
-        planner.close()
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="no os.fork on this platform")
@@ -481,20 +491,11 @@ def test_the_helper_decides_later_layers_intra_pose_ends_as_this_process_would()
     not decided yet to the helper; ``_layers_taken`` puts its answer into the context's
     caches: the LayerData and ``holds`` that this process computes, bit for bit, and
     nothing is sent again once they are known."""
-    import dataclasses
-
     from ldhp_tamp.grasp_graph import _Layer
     from ldhp_tamp.primitives.adjust_grasp import AdjustContext
 
-    sc, grasps, tip = task1_tip(12)
-    world = sc.world
-    up = lift(world, tip.end, 50.0)
-    opts = dataclasses.replace(GraspGraphOptions(), helper=True)
-    planner = GraspPlanner(world, grasps, bindings(), sc.start_grasp, sc.goal_release, opts)
-    try:
-        planner._prepare(np.asarray(tip.poses[0], dtype=float))
-        if planner._helper_process() is None:
-            pytest.skip("no second core")
+    with _with_helper() as (sc, planner, tip, up):
+        world = sc.world
         ctx = planner.context
         poses = [np.asarray(tip.poses[0], dtype=float), np.asarray(tip.end.as_array(), dtype=float),
                  np.asarray(up.end.as_array(), dtype=float)]
@@ -517,8 +518,6 @@ def test_the_helper_decides_later_layers_intra_pose_ends_as_this_process_would()
                 assert np.array_equal(getattr(got, field.name), getattr(want, field.name))
         assert not ctx.holds_known(layers[0].pose, layers[0].members)
         assert planner._layers_meanwhile(ctx, layers) == []  # known now: nothing to send
-    finally:
-        planner.close()
 
 
 def test_a_helper_asked_for_by_grasp_set_holds_that_set_and_the_shared_state(monkeypatch) -> None:

@@ -11,27 +11,16 @@ import pytest
 from ldhp_tamp import parallel
 from ldhp_tamp.errors import TimeBudgetExceeded
 from ldhp_tamp.parallel import fork_map
+from processes import child_pids
 
 needs_fork = pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
 
 
 def _children() -> set[int]:
-    """PIDs of this process's children (Linux /proc), once the ones that answered as they
-    ended are reaped (``parallel.reap``, which a solve calls at its end); other tests may
-    have left some (multiprocessing's resource tracker): compare with the set before."""
+    """PIDs of this process's children (zombies included), once the ones that answered as
+    they ended are reaped (``parallel.reap``, which a solve calls at its end)."""
     parallel.reap()
-    me = os.getpid()
-    out = set()
-    for pid in os.listdir("/proc"):
-        if pid.isdigit():
-            try:
-                with open(f"/proc/{pid}/stat") as f:
-                    fields = f.read().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[1]) == me:
-                out.add(int(pid))
-    return out
+    return child_pids()
 
 
 @needs_fork
@@ -39,27 +28,12 @@ def test_a_child_that_answered_is_reaped_later_and_none_is_left_after_reap() -> 
     """The parent takes a child's whole answer without waiting for its end (the end of a
     forked copy of a large process takes milliseconds): such a child is left to
     ``reap``, and after it none is left, zombie or not."""
-    def children_and_zombies() -> set[int]:
-        me, out = os.getpid(), set()
-        for pid in os.listdir("/proc"):
-            if pid.isdigit():
-                try:
-                    with open(f"/proc/{pid}/stat") as f:
-                        fields = f.read().rsplit(")", 1)[1].split()
-                except OSError:
-                    continue
-                if int(fields[1]) == me:
-                    out.add(int(pid))
-        return out
-
-    parallel.reap()
-    before = children_and_zombies()
+    before = _children()
     ballast = bytearray(200 << 20)  # a larger process ends more slowly
     ballast[::4096] = b"x" * len(ballast[::4096])
     assert fork_map(lambda x: x + 1, list(range(40)), 2) == list(range(1, 41))
     assert parallel.Forked(lambda: 7).result() == 7
-    parallel.reap()
-    assert not parallel._UNREAPED and children_and_zombies() <= before
+    assert _children() <= before and not parallel._UNREAPED
     del ballast
 
 

@@ -516,23 +516,12 @@ def test_a_solve_leaves_no_child_behind(monkeypatch) -> None:
     monkeypatch.setattr(parallel, "cores", lambda: 2)
     monkeypatch.setattr(grasp_graph, "cores", lambda: 2)
 
-    def children() -> set[int]:
-        me, out = os.getpid(), set()
-        for pid in os.listdir("/proc"):
-            if pid.isdigit():
-                try:
-                    with open(f"/proc/{pid}/stat") as f:
-                        fields = f.read().rsplit(")", 1)[1].split()
-                except OSError:
-                    continue
-                if int(fields[1]) == me:
-                    out.add(int(pid))
-        return out
+    from processes import child_pids
 
     parallel.reap()
-    before = children()
+    before = child_pids()
     assert solve(load_scenario(PICK)).status is SolveStatus.SOLVED
-    assert children() <= before and not parallel._UNREAPED
+    assert child_pids() <= before and not parallel._UNREAPED
 
 
 def test_the_solve_forks_its_helper_once_in_the_setup(pick_result, monkeypatch) -> None:
