@@ -8,10 +8,11 @@ which imports every installed engine and with them ConfigSpace and scipy.stats: 
 0.8 s, and 0.1 s to make the factory), as :func:`ldhp_tamp.symbolic.load_checked_domain`
 would in each cell's solve, and builds unified-planning's PDDL grammar (0.02 s, as the
 first parse would) and streamlines it with a parse of a small domain (pyparsing does that
-in a process's first parse: 14 ms). It also reads the installed engines' releases (``importlib.metadata``,
-which :func:`ldhp_tamp.engine_names.recorded_kind` compares with the recorded ones: 3-6 ms
-with its import of the email parser) and imports ``multiprocessing.connection``, through
-whose pipes the solve talks to its helper process (2 ms). A cell's ``time_s`` then counts
+in a process's first parse: 14 ms). It also reads the installed engines' releases
+(``importlib.metadata``, which :func:`ldhp_tamp.engine_names.recorded_kind` compares with
+the recorded ones: 3-6 ms with its import of the email parser) and imports
+``multiprocessing.connection``, through whose pipes the solve talks to its helper process
+(2 ms). A cell's ``time_s`` then counts
 the solve, not these imports, as it counts no other import (``docs/benchmarks.md``, "The
 paper's tasks").
 
