@@ -12,9 +12,8 @@ in a process's first parse: 14 ms). It also reads the installed engines' release
 (``importlib.metadata``, which :func:`ldhp_tamp.engine_names.recorded_kind` compares with
 the recorded ones: 3-6 ms with its import of the email parser) and imports
 ``multiprocessing.connection``, through whose pipes the solve talks to its helper process
-(2 ms). A cell's ``time_s`` then counts
-the solve, not these imports, as it counts no other import (``docs/benchmarks.md``, "The
-paper's tasks").
+(2 ms). A cell's ``time_s`` then counts the solve, not these imports, as it counts no
+other import (``docs/benchmarks.md``, "The paper's tasks").
 
 ``ldhp-tamp solve`` does not import it: there the engines are made while the solve loads,
 and ``time_s`` counts from the command's start anyway.
