@@ -64,6 +64,7 @@ def fork_map(fn: Callable[[T], R], items: Sequence[T], jobs: int | None = None, 
     its items to the parent, which only ever waits for the items a child has started.
     """
     items = list(items)
+    reap(block=False)  # the children of earlier calls that have ended since
     jobs = cores() if jobs is None else max(1, int(jobs))
     jobs = min(jobs, len(items) // max(1, int(min_items_per_core)))
     if jobs <= 1 or not hasattr(os, "fork"):
@@ -246,6 +247,7 @@ class Forked(Generic[R]):
     def __init__(self, fn: Callable[..., R], *args: object) -> None:
         self._call: tuple[Callable[..., R], tuple[object, ...]] | None = None
         self._pid, self._read_end = -1, -1
+        reap(block=False)  # the children of earlier calls that have ended since
         if cores() < 2 or not hasattr(os, "fork"):
             self._call = (fn, args)
             return

@@ -47,6 +47,7 @@ the solve's ``timeout`` (wall time).
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import itertools
 import logging
@@ -62,7 +63,7 @@ from geometry.grasps import NO_CONTACT, GraspOptions, MotionCheckOptions, enumer
 from geometry.kinematics import Motion, MotionKind, rotate_about, sweep, translate, two_contact
 from geometry.poses import FloatArray, IntArray, Pose, wrap_angle
 from geometry.world import World
-from ldhp_tamp import budget
+from ldhp_tamp import budget, parallel
 from ldhp_tamp.budget import Budget
 from ldhp_tamp.domain_info import DomainActions, read_domain_actions
 from ldhp_tamp.errors import TimeBudgetExceeded
@@ -899,7 +900,11 @@ def solve_rrt(scenario: Scenario, options: SolveOptions = SolveOptions(), rrt: R
             if scenario.settings.friction_margin > 0:  # plan with less friction, as LDHP does
                 world = replace(world, friction=world.friction.scaled(1.0 - scenario.settings.friction_margin))
             search = _Search(scenario, world, options, rrt, domain, deadline, stats)
-            return _run(search, scenario, options, stats, start)
+            try:
+                return _run(search, scenario, options, stats, start)
+            finally:  # the forked children whose answers came as they ended (parallel.reap)
+                with contextlib.suppress(TimeBudgetExceeded):
+                    parallel.reap()
     except TimeBudgetExceeded as exc:
         nodes = 0 if search is None else len(search.nodes)
         reason = (f"timeout: the {options.timeout:g} s budget ran out in {exc.where} "
