@@ -115,13 +115,7 @@ class PlanningContext:
     """``None``, or the bottom tier's
     :meth:`~ldhp_tamp.grasp_graph.GraspPlanner.live_helper`: a function returning its
     live :class:`ldhp_tamp.parallel.Helper` (or ``None``), whose state starts with the
-    world, the streams' sweeps may run there; given a grasp set, only a helper whose
-    state holds that set and ends with the setup's ``(context, domain, registry)``, the
-    lift-off poses' carriers may run there."""
-    jobs: int | None = None
-    """Processes the streams' independent work may be shared by without a live
-    :attr:`helper` (the lift-off poses, :func:`ldhp_tamp.parallel.fork_map`): ``None``,
-    the machine's cores; 1 keeps it in this process (a solve without helpers)."""
+    world: every second stream sweep runs there."""
 
     @property
     def start_free(self) -> bool:

@@ -832,13 +832,14 @@ class GraspPlanner:
         helper.submit(_helper_layers, [(layers[k].pose, layers[k].members) for k in todo])
         return todo
 
-    def _layers_taken(self, ctx: AdjustContext, sent: list[int]) -> None:
-        """Take the helper's answer to :meth:`_layers_meanwhile` into the context's caches
-        (the same values :meth:`AdjustContext.holds` and :meth:`AdjustContext.layer` give
-        here: every instance is decided by the same operations)."""
+    def _layers_taken(self, ctx: AdjustContext, layers: Sequence[_Layer], sent: list[int]) -> None:
+        """Take the helper's answer to :meth:`_layers_meanwhile` (about ``layers[k]`` for
+        each ``k`` of ``sent``) into the context's caches (the same values
+        :meth:`AdjustContext.holds` and :meth:`AdjustContext.layer` give here: every
+        instance is decided by the same operations)."""
         assert self._helper is not None
-        for data, decided, held in self._helper.result():
-            ctx.take_holds(data, decided, held)
+        for k, (data, held) in zip(sent, self._helper.result()):
+            ctx.take_holds(data, layers[k].members, held)
 
     def _meanwhile(self, segments: Sequence[Segment], busy: Segment) -> int:
         """While the helper's G_m (of segment ``busy``) has not come back, the G_m of the
@@ -970,7 +971,7 @@ class GraspPlanner:
             for k, layer in enumerate(layers):
                 budget.check(deadline, "the bottom tier, making the candidate AdjustGrasp edges")
                 if ahead and k == ahead[0]:
-                    self._layers_taken(ctx, ahead)
+                    self._layers_taken(ctx, layers, ahead)
                     ahead = []
                     rating = self._rate_meanwhile(segments)
                 t0 = time.perf_counter()
@@ -988,7 +989,7 @@ class GraspPlanner:
                 self.close()  # its answer is not wanted (the next use forks another helper)
             raise
         if ahead:  # the layers' forward reachability died before them: taken for the cache
-            self._layers_taken(ctx, ahead)
+            self._layers_taken(ctx, layers, ahead)
         if rating:
             self._rated(rating)
         timings["candidates"] = t_cand
@@ -1581,12 +1582,12 @@ def _helper_motion(state: tuple[Any, ...], poses: FloatArray, cand: IntArray,
 
 
 def _helper_layers(state: tuple[Any, ...], layers: list[tuple[FloatArray, BoolArray]]
-                   ) -> list[tuple[LayerData, BoolArray, BoolArray]]:
+                   ) -> list[tuple[LayerData, BoolArray]]:
     """The helper's intra-pose ends of layers (see :meth:`GraspPlanner._layers_meanwhile`):
-    each pose's :class:`LayerData`, the grasps decided (G_T) and which of them hold the
-    object still, with its copy of the primitives' context."""
+    each pose's :class:`LayerData` and which grasps of its G_T hold the object still,
+    with its copy of the primitives' context."""
     ctx: AdjustContext = state[3]
-    return [(ctx.layer(pose), members, ctx.holds(pose, members)) for pose, members in layers]
+    return [(ctx.layer(pose), ctx.holds(pose, members)) for pose, members in layers]
 
 
 def _helper_rate(state: tuple[Any, ...], sets: list[tuple[FloatArray, MotionGrasps]]) -> list[MotionGrasps]:

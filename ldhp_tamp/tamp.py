@@ -93,11 +93,12 @@ class SolveOptions:
     """How often one pose path is planned again after a judge (validation, simulation)
     refused its plan at a MoveObject step, without the grasp carried there."""
     helpers: bool = True
-    """On a machine with more than one core, let a helper process (forked by the bottom
-    tier with the grasp set) take half of the G_T and G_m computations and of the streams'
-    sweeps, a forked process compute the setup's transitions while this one builds the
-    grasp graph's tables, and the cores share the streams' lift-off poses; the plans are
-    the same either way."""
+    """On a machine with more than one core, let a child enumerate the grasps while this
+    process enumerates the contact states, and a helper process (forked by the bottom
+    tier with the grasp set) compute the setup's transitions while this one builds the
+    grasp graph's tables, then take half of the G_T and G_m computations and of the
+    streams' sweeps (and more, ``docs/design.md``, "parallel.py"); the plans are the same
+    either way."""
     feedback: bool = True
     """Feed a failed pose path back to the symbolic tier as constraints (the failing
     transitions are forbidden); ``False`` (the ``ldhp-nofeedback`` planner): nothing is
@@ -437,8 +438,8 @@ def _solve(scenario: Scenario, options: SolveOptions, progress: Callable[[str], 
         say(f"{len(ctx.states)} contact states, {sum(len(v) for v in transitions.values())} admissible "
             f"transitions, {len(grasps)} candidate grasps ({clock.setup:.2f} s)")
 
-        # the streams' sweeps and lift-off poses, half of them in the bottom tier's helper
-        ctx = replace(ctx, helper=grasp_planner.live_helper, jobs=None if options.helpers else 1)
+        # the streams' sweeps, half of them in the bottom tier's helper
+        ctx = replace(ctx, helper=grasp_planner.live_helper)
         judge = _Judge(scenario, engine, options.simulate, c, clock, helper=grasp_planner.live_helper)
         # The transitions a prior rates unlikely to pass the bottom tier: left out of the plans
         # until no plan is left without them.

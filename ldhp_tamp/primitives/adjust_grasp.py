@@ -707,11 +707,7 @@ class AdjustContext:
         that a layer pays only for its G_T. Decisions are cached per pose."""
         layer = self.layer(pose)
         gs = self.grasps
-        key = ("holds", layer.pose.tobytes())
-        hit = self._cache.get(key)
-        if hit is None:
-            hit = self._cache[key] = (np.zeros(len(gs), dtype=bool), np.zeros(len(gs), dtype=bool))
-        known, value = hit
+        known, value = self._holds_entry(layer.pose)
         want = np.ones(len(gs), dtype=bool) if among is None else np.asarray(among, dtype=bool)
         todo = want & ~known
         if todo.any():
@@ -743,6 +739,15 @@ class AdjustContext:
         out.setflags(write=False)
         return out
 
+    def _holds_entry(self, pose: FloatArray) -> tuple[BoolArray, BoolArray]:
+        """The (G,) masks :meth:`holds` keeps at ``pose`` (its (3,) array): the grasps
+        decided and their answers."""
+        key = ("holds", pose.tobytes())
+        hit = self._cache.get(key)
+        if hit is None:
+            hit = self._cache[key] = (np.zeros(len(self.grasps), dtype=bool), np.zeros(len(self.grasps), dtype=bool))
+        return hit
+
     def holds_known(self, pose: Pose | ArrayLike, among: BoolArray) -> bool:
         """Whether :meth:`holds` has decided every grasp of ``among`` at ``pose`` (it
         would compute nothing)."""
@@ -756,11 +761,7 @@ class AdjustContext:
         the grasps not decided here yet (both decide an instance by the same operations,
         so the values agree)."""
         self._cache.setdefault(("layer", layer.pose.tobytes()), layer)
-        hit = self._cache.get(("holds", layer.pose.tobytes()))
-        if hit is None:
-            hit = self._cache[("holds", layer.pose.tobytes())] = (np.zeros(len(self.grasps), dtype=bool),
-                                                                 np.zeros(len(self.grasps), dtype=bool))
-        known, value = hit
+        known, value = self._holds_entry(layer.pose)
         new = np.asarray(decided, dtype=bool) & ~known
         value[new] = np.asarray(held, dtype=bool)[new]
         known |= new
@@ -1768,8 +1769,8 @@ class Pivot(_AdjustGrasp):
             resid = (u[ib] - u[ia]) - r * delta
             keep = (ia != ib) & (np.abs(delta) > ROLL_MIN_TURN) & (np.abs(resid) <= ROLL_TOL)
             found.append((ia[keep], ib[keep], delta[keep], resid[keep]))
-        ia, ib, delta, resid = (np.concatenate([f[n] for f in found] + [np.zeros(0, x.dtype)])
-                                for n, x in enumerate((z, z, np.zeros(0), np.zeros(0))))
+        ia, ib, delta, resid = (np.concatenate(part) for part in zip(*found)) if found else (z, z, np.zeros(0),
+                                                                                           np.zeros(0))
         # in (source, target) order, each pair once (the tests are the pair's alone, so
         # the few that pass are ordered, not the candidates)
         pick = _pair_order(ia, ib, rows.size)

@@ -542,7 +542,7 @@ def test_lift_offs_rank_as_with_every_carrier_counted(task1_grasps, domain, limi
     path = next(iter(pose_paths(replace(base, memo={}), plan, domain.info, REGISTRY, np.random.default_rng(0),
                                 StreamStats())))
     tip = path.segments[0]
-    ctx = replace(base, memo={}, jobs=1)
+    ctx = replace(base, memo={})
     turned = []
     real = streams.carriers_among
 
@@ -559,7 +559,7 @@ def test_lift_offs_rank_as_with_every_carrier_counted(task1_grasps, domain, limi
     search = streams.PathSearch(ctx, plan, domain.info, REGISTRY, np.random.default_rng(0), StreamStats(), limit=limit)
     got = [moves[-1].s1 for moves in search._lift_offs(t, [(tip,)])]
     # every pose's carriers counted, then ranked
-    found = streams._lift_off_candidates(replace(base, memo={}, jobs=1), tip, S("v2-e1"))
+    found = streams._lift_off_candidates(replace(base, memo={}), tip, S("v2-e1"))
     values = [v for v, _, _ in found]
     ranked = []
     for i, (v, pose, held) in enumerate(found):

@@ -507,7 +507,7 @@ def test_the_helper_decides_later_layers_intra_pose_ends_as_this_process_would()
                                  lambda p=p, m=members: ctx.holds(p, m)))
         sent = planner._layers_meanwhile(ctx, layers)
         assert sent == [1, 2]  # not the first: this process makes its candidates meanwhile
-        planner._layers_taken(ctx, sent)
+        planner._layers_taken(ctx, layers, sent)
         assert planner._helper.idle
         fresh = AdjustContext(world, planner.grasps, planner.options.adjust)
         for layer in layers[1:]:

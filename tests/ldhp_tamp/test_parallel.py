@@ -298,14 +298,19 @@ def test_two_at_a_time_gives_every_second_item_to_the_helper_in_order() -> None:
         assert all((pid == os.getpid()) == (i % 2 == 0) for i, (_, pid) in enumerate(got))
         assert h.idle
         assert two_at_a_time(h, [5], here, there) == [(45, os.getpid())]  # one item: here
-
-        def fail(x):
-            raise KeyError(x)
-        with pytest.raises(KeyError):
-            two_at_a_time(h, [1, 2], fail, there)
-        assert not h.alive  # its answer not wanted: closed, not waited for
+        _a_failure_here_closes(h, lambda fail: two_at_a_time(h, [1, 2], fail, there))
     finally:
         h.close()
+
+
+def _a_failure_here_closes(h, call) -> None:
+    """``call(fail)`` raises ``fail``'s error, and ``h`` is closed: its answer is not
+    wanted, and it is not waited for."""
+    def fail(x):
+        raise KeyError(x)
+    with pytest.raises(KeyError):
+        call(fail)
+    assert not h.alive
 
 
 def _add_all_where(state, xs):
@@ -328,12 +333,7 @@ def test_two_halves_gives_every_second_item_to_the_helper_in_one_call() -> None:
         assert [n for _, _, n in got] == [4, 3, 4, 3, 4, 3, 4]  # one batch each
         assert h.idle
         assert two_halves(h, [5], here, there) == [(45, os.getpid(), 1)]  # one item: here
-
-        def fail(xs):
-            raise KeyError(xs)
-        with pytest.raises(KeyError):
-            two_halves(h, [1, 2], fail, there)
-        assert not h.alive  # its answer not wanted: closed, not waited for
+        _a_failure_here_closes(h, lambda fail: two_halves(h, [1, 2], fail, there))
     finally:
         h.close()
 
